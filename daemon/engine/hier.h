@@ -1,0 +1,160 @@
+/*
+ * hier.h -- the element hierarchy and the link store shared by all solvers.
+ *
+ * DESIGN
+ * Three pools, each of fixed-size records addressed by 32-bit ids that
+ * never move (mem.h):
+ *   - surface elements (rad_elem): the quadtree of each input polygon.
+ *     Ids 0 .. npolys-1 are the roots, one per scene polygon, same index.
+ *     The four children of an element are stored together (child .. child+3).
+ *   - clusters (rad_cluster): a binary volume hierarchy over all polygons
+ *     up to one root cluster (id 0).  An inner cluster has two child
+ *     clusters (child, child+1); a leaf cluster holds up to
+ *     RAD_CLUSTER_LEAF_MAX polygons, a contiguous range of order[].
+ *     Every cluster covers a contiguous range of order[], so "the polygons
+ *     in this cluster" is a range, never a list walk.
+ *   - links (rad_link): receiver <- source transfers with their form factor,
+ *     chained per receiver through `next`.  A link also has `child` and
+ *     `nchild` so that a refined (passive) link can keep its children
+ *     (consecutive records) for the link hierarchy of the reduced-memory
+ *     solver; classic HR frees refined links instead.
+ *
+ * Node ids in links are tagged: a plain id is a surface element, id with
+ * RAD_TAG_CLUSTER a cluster, id with RAD_TAG_LIGHT a scene light (lights are
+ * sources only and are never split).
+ *
+ * Radiometry on nodes (RGB floats):
+ *   B  radiosity (exitance, lux); on inner nodes the area average of the
+ *      leaves below (pull); on clusters the area average of contents.
+ *   I  irradiance gathered by the node's own links this iteration.  On a
+ *      cluster it is normal irradiance (isotropic receiver); pushing it to a
+ *      polygon multiplies by 1/4 (the mean of cos+ over the sphere).
+ *   dB radiosity still to transmit (reduced-memory solver); free for other
+ *      solvers to use as "previous B" or "unshot radiosity".
+ * Emission E and reflectance rho come from the polygon's material.
+ */
+#ifndef LUXRAD_HIER_H
+#define LUXRAD_HIER_H
+
+#include "mem.h"
+#include "scene.h"
+
+#define RAD_TAG_CLUSTER 0x80000000u
+#define RAD_TAG_LIGHT 0x40000000u
+#define RAD_TAG_MASK (RAD_TAG_CLUSTER | RAD_TAG_LIGHT)
+#define RAD_CLUSTER_LEAF_MAX 4
+
+typedef struct rad_elem {
+	float p0[3], e1[3], e2[3]; /* sub-region of the polygon (scene.h) */
+	float area;                /* m2 */
+	uint32_t poly;             /* root polygon (material, normal, node) */
+	uint32_t parent;           /* RAD_NONE for a root */
+	uint32_t child;            /* first of 4 children, RAD_NONE for a leaf */
+	uint32_t links;            /* head of the links received, or RAD_NONE */
+	float B[3], I[3], dB[3];   /* see DESIGN */
+	uint8_t level;             /* depth below the polygon root */
+	uint8_t quad;              /* copied from the polygon */
+	uint16_t flags;            /* solver-private */
+} rad_elem;
+
+typedef struct rad_cluster {
+	float lo[3], hi[3];   /* bounding box of the contents */
+	float area;           /* total area of the polygons inside */
+	uint32_t parent;      /* RAD_NONE for the root */
+	uint32_t child;       /* first of 2 child clusters, RAD_NONE = leaf */
+	uint32_t first, count;/* range of order[] covered */
+	uint32_t links;       /* head of the links received */
+	float B[3], I[3], dB[3];
+} rad_cluster;
+
+enum {
+	RAD_LINK_PASSIVE = 1u << 0,   /* refined; children kept */
+	RAD_LINK_SPLIT_SRC = 1u << 1, /* passive: the source was split */
+};
+
+typedef struct rad_link {
+	uint32_t rcv;    /* tagged receiver id */
+	uint32_t src;    /* tagged source id */
+	float ff;        /* F(rcv <- src), visibility included; for a light,
+			    irradiance (lux) per unit of its intensity */
+	uint32_t next;   /* next link on the same receiver */
+	uint32_t child;  /* first child link (passive links), else RAD_NONE */
+	uint16_t nchild; /* number of consecutive children */
+	uint16_t flags;  /* RAD_LINK_* */
+} rad_link;
+
+typedef struct rad_hier {
+	const rad_scene *scene;
+	rad_mem *mem;          /* the owning solver's counters */
+	rad_pool elems;        /* rad_elem, ELEM_SURFACE */
+	rad_pool clusters;     /* rad_cluster, ELEM_CLUSTER */
+	rad_pool links;        /* rad_link, LINKS */
+	uint32_t *order;       /* polygon ids in cluster order, ELEM_CLUSTER */
+	uint32_t nleaves;      /* surface leaves */
+	double min_edge;       /* elements with a longer edge may split */
+	uint64_t splits;       /* element splits since last reset */
+} rad_hier;
+
+static inline rad_elem *rad_elem_at(const rad_hier *h, uint32_t id)
+{
+	return (rad_elem *)rad_pool_at(&h->elems, id);
+}
+static inline rad_cluster *rad_cluster_at(const rad_hier *h, uint32_t id)
+{
+	return (rad_cluster *)rad_pool_at(&h->clusters, id & ~RAD_TAG_MASK);
+}
+static inline rad_link *rad_link_at(const rad_hier *h, uint32_t id)
+{
+	return (rad_link *)rad_pool_at(&h->links, id);
+}
+
+/*
+ * Build the polygon roots and the cluster tree.  min_edge in metres.
+ * On failure everything allocated is released.
+ */
+rad_status rad_hier_init(rad_hier *h, const rad_scene *s, rad_mem *mem,
+			 double min_edge, rad_error *err);
+void rad_hier_destroy(rad_hier *h);
+
+/* Longest edge of an element's region, metres. */
+double rad_elem_edge(const rad_elem *e);
+/* 1 if the element may be split (its edge exceeds min_edge). */
+int rad_elem_can_split(const rad_hier *h, const rad_elem *e);
+/*
+ * Make the four children of element id if it has none (B, dB copied from
+ * the parent, I zero).  Returns the first child id, or RAD_NONE when out
+ * of memory.  Not thread-safe.
+ */
+uint32_t rad_elem_split(rad_hier *h, uint32_t id);
+
+/* Subdivide every polygon uniformly until edges are <= edge (matrix mesh). */
+rad_status rad_hier_mesh_uniform(rad_hier *h, double edge, rad_error *err);
+
+/* Set B = E and clear I, dB on every node (pull included). */
+void rad_hier_reset_emission(rad_hier *h);
+
+/*
+ * Pull: recompute B on inner surface elements and clusters as area
+ * averages of the leaves' B.  Reads and writes B only.
+ */
+void rad_hier_pull(rad_hier *h);
+
+/* Material of the polygon an element belongs to. */
+static inline const rad_material *rad_elem_mat(const rad_hier *h,
+					       const rad_elem *e)
+{
+	return &h->scene->mats[h->scene->polys[e->poly].mat];
+}
+
+/* Photopic luminance of an RGB value. */
+static inline double rad_luma(const float c[3])
+{
+	return RAD_LUMA_R * c[0] + RAD_LUMA_G * c[1] + RAD_LUMA_B * c[2];
+}
+
+/* Link store: allocate one link (zeroed, child = RAD_NONE), or RAD_NONE. */
+uint32_t rad_link_new(rad_hier *h, uint32_t rcv, uint32_t src, float ff);
+/* Head pointer of a node's received-links list (element or cluster). */
+uint32_t *rad_node_links(rad_hier *h, uint32_t tagged);
+
+#endif

@@ -1,0 +1,277 @@
+/*
+ * rad.h -- the public interface of the luxrad engine.
+ *
+ * The engine is a library: it holds a scene (geometry, materials, light
+ * sources, the Embree BVH) and solvers over that scene (matrix, progressive,
+ * hierarchical radiosity with clustering).  It does no I/O of its own: it
+ * never prints, never exits, never aborts on bad input.  Every fallible call
+ * returns a rad_status and, when the caller passes one, fills a rad_error
+ * with a message that names what was wrong.
+ *
+ * Units: metres, lux (lm/m2) for illuminance and exitance, cd/m2 for
+ * luminance, candela for point and spot intensities, lux for directional
+ * lights.  Radiometric quantities are RGB triples (photometric "channels");
+ * the lux reported by queries is the photopic combination of the three.
+ *
+ * Ownership: objects made by rad_X_new are freed by rad_X_free.  A scene
+ * must outlive every solver made on it.  A committed scene is read-only and
+ * may be shared by any number of solvers and threads; a solver is used by
+ * one thread at a time, except rad_solver_illuminance() and
+ * rad_solver_stats(), which read the last published solution and may run
+ * concurrently with each other (not with rad_solver_step()).
+ */
+#ifndef LUXRAD_RAD_H
+#define LUXRAD_RAD_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* ---------------------------------------------------------------- errors */
+
+typedef enum rad_status {
+	RAD_OK = 0,
+	RAD_ERR_NOMEM,       /* an allocation failed; the object is unchanged */
+	RAD_ERR_INVALID,     /* bad input: malformed scene, bad option, NaN... */
+	RAD_ERR_UNSUPPORTED, /* valid input that the engine does not handle */
+	RAD_ERR_STATE,       /* call not allowed in the object's state */
+	RAD_ERR_EMBREE,      /* the ray tracing kernel reported an error */
+	RAD_ERR_CANCELLED,   /* the caller's cancel flag was raised */
+	RAD_ERR_LIMIT,       /* a configured limit (memory budget...) was hit */
+} rad_status;
+
+typedef struct rad_error {
+	rad_status code;
+	char msg[512]; /* NUL-terminated, names the offending object */
+} rad_error;
+
+/* Short constant name of a status ("invalid", "nomem"...). */
+const char *rad_status_name(rad_status st);
+
+/* ------------------------------------------------------ memory accounting */
+
+/*
+ * Every byte the engine holds is counted under exactly one kind.  The kinds
+ * are listed once here; the report is the exact sum of what the engine's
+ * allocations hold (malloc_usable_size of each block, plus what Embree's
+ * memory monitor reports for the BVH), and every kind reads zero once the
+ * owning object is freed.
+ */
+#define RAD_MEM_KINDS(X)                                                       \
+	X(GEOMETRY, "geometry")          /* input polygons, vertices */            \
+	X(MATERIALS, "materials")        /* the shared material table */           \
+	X(LIGHTS, "lights")              /* punctual and directional lights */     \
+	X(NAMES, "names")                /* node and mesh names */                 \
+	X(BVH, "bvh")                    /* Embree: BVH and its buffers */         \
+	X(ELEM_SURFACE, "elements_surface") /* quadtree elements of polygons */    \
+	X(ELEM_CLUSTER, "elements_cluster") /* volume clusters */                  \
+	X(LINKS, "links")                /* link pool (active and passive) */      \
+	X(MATRIX, "matrix")              /* the matrix solver's form factors */    \
+	X(SCRATCH, "scratch")            /* per-iteration work buffers */
+
+typedef enum rad_mem_kind {
+#define RAD_MEM_ENUM_(name, str) RAD_MEM_##name,
+	RAD_MEM_KINDS(RAD_MEM_ENUM_)
+#undef RAD_MEM_ENUM_
+	RAD_MEM_NKINDS
+} rad_mem_kind;
+
+typedef struct rad_mem_report {
+	int64_t bytes[RAD_MEM_NKINDS]; /* current bytes by kind */
+	int64_t total;                 /* sum of bytes[] */
+	int64_t peak_total;            /* high-water mark of total */
+} rad_mem_report;
+
+/* JSON-friendly name of a kind ("geometry", "links"...). */
+const char *rad_mem_kind_name(rad_mem_kind kind);
+
+/* ------------------------------------------------------------------ scene */
+
+typedef struct rad_scene rad_scene;
+
+typedef enum rad_light_kind {
+	RAD_LIGHT_POINT = 0,  /* intensity in candela, isotropic */
+	RAD_LIGHT_SPOT,       /* candela on axis, smooth glTF cone falloff */
+	RAD_LIGHT_DIRECTIONAL /* illuminance in lux on a plane facing it */
+} rad_light_kind;
+
+typedef struct rad_light_desc {
+	rad_light_kind kind;
+	double position[3];  /* metres (point, spot) */
+	double direction[3]; /* direction light travels (spot, directional) */
+	double intensity[3]; /* candela (point, spot) or lux (directional) */
+	double range;        /* metres; 0 = infinite (glTF default) */
+	double inner_cone;   /* radians, spot only */
+	double outer_cone;   /* radians, spot only */
+	const char *name;    /* copied; may be NULL */
+} rad_light_desc;
+
+typedef struct rad_scene_counts {
+	uint32_t triangles_in;        /* triangles offered to the builder */
+	uint32_t triangles_nonfinite; /* skipped: NaN or Inf coordinate */
+	uint32_t triangles_degenerate;/* skipped: zero or sliver area */
+	uint32_t polygons;            /* polygons kept (after quad merging) */
+	uint32_t quads;               /* of which parallelograms */
+	uint32_t materials;           /* distinct materials stored */
+	uint32_t materials_offered;   /* materials offered (before sharing) */
+	uint32_t lights;
+	uint32_t emitters;            /* polygons with non-zero exitance */
+	uint32_t nodes;
+} rad_scene_counts;
+
+/* Make an empty scene to be filled by the calls below, then committed. */
+rad_status rad_scene_new(rad_scene **out, rad_error *err);
+
+/*
+ * Add a material; returns its id in *id.  Identical materials share one
+ * entry (the id of the first is returned).  reflectance in [0,1) per
+ * channel; luminance in cd/m2 (a Lambertian emitter's exitance is pi*L).
+ */
+rad_status rad_scene_add_material(rad_scene *s, const double reflectance[3],
+				  const double luminance[3], uint32_t *id,
+				  rad_error *err);
+
+/* Add a named node (glTF node or mesh instance); returns its id. */
+rad_status rad_scene_add_node(rad_scene *s, const char *name, uint32_t *id,
+			      rad_error *err);
+
+/*
+ * Add ntri triangles given as 9 doubles each (three world-space vertices,
+ * counter-clockwise seen from the front), all with one material and node.
+ * Triangles with a non-finite coordinate or a degenerate shape are skipped
+ * and counted, not refused.
+ */
+rad_status rad_scene_add_triangles(rad_scene *s, uint32_t material,
+				   uint32_t node, const double *xyz,
+				   size_t ntri, rad_error *err);
+
+rad_status rad_scene_add_light(rad_scene *s, const rad_light_desc *light,
+			       rad_error *err);
+
+/*
+ * Finish the scene: merge coplanar triangle pairs into parallelograms,
+ * compute bounds and build the BVH.  After this the scene is read-only.
+ */
+rad_status rad_scene_commit(rad_scene *s, rad_error *err);
+
+void rad_scene_counts_get(const rad_scene *s, rad_scene_counts *out);
+void rad_scene_memory(const rad_scene *s, rad_mem_report *out);
+/* Axis-aligned bounds of the geometry and the lights, metres. */
+void rad_scene_bounds(const rad_scene *s, double lo[3], double hi[3]);
+void rad_scene_free(rad_scene *s);
+
+/* ----------------------------------------------------------------- solver */
+
+typedef enum rad_solver_kind {
+	RAD_SOLVER_MATRIX = 0, /* full form-factor matrix, Gauss-Seidel */
+	RAD_SOLVER_PROGRESSIVE,/* shooting with adaptive subdivision */
+	RAD_SOLVER_HR,         /* hierarchical radiosity (+ clustering) */
+	RAD_SOLVER_NKINDS
+} rad_solver_kind;
+
+typedef enum rad_oracle {
+	RAD_ORACLE_BFA = 0, /* emitter radiosity x form factor x rcv area */
+	RAD_ORACLE_F,       /* form factor alone */
+	RAD_ORACLE_BF,      /* emitter radiosity x form factor */
+} rad_oracle;
+
+typedef struct rad_options {
+	rad_solver_kind solver;
+	rad_oracle oracle;
+	/*
+	 * Refinement threshold.  BFA: fraction of the total emitted flux a
+	 * link may carry; BF: fraction of the largest exitance; F: form
+	 * factor.  Smaller is finer, slower, bigger.
+	 */
+	double eps;
+	/* Smallest element, as a fraction of the scene's bounding-box
+	 * diagonal (edge length).  Stops refinement at corners. */
+	double min_edge_rel;
+	/* Matrix solver (and progressive's starting mesh): element edge,
+	 * as a fraction of the bounding-box diagonal. */
+	double mesh_edge_rel;
+	int clustering;        /* hr: volume clusters on (default 1) */
+	int threads;           /* worker threads; 0 = number of cores */
+	int rcv_samples;       /* receiver points per form factor (1..16) */
+	int vis_samples;       /* shadow rays per receiver point (1..16) */
+	/* Called from the stepping thread within long iterations; may be NULL. */
+	void (*progress)(void *ud, double fraction);
+	void *progress_ud;
+	/* Raised by another thread to stop a step early (RAD_ERR_CANCELLED). */
+	const volatile int *cancel;
+} rad_options;
+
+void rad_options_default(rad_options *o);
+/* Parse "matrix" / "progressive" / "hr"; returns RAD_ERR_INVALID if unknown. */
+rad_status rad_solver_kind_parse(const char *name, rad_solver_kind *out);
+const char *rad_solver_kind_name(rad_solver_kind k);
+
+typedef struct rad_stats {
+	uint32_t iteration;     /* iterations done so far */
+	double seconds;         /* wall time of the last iteration */
+	double seconds_total;   /* wall time of all iterations */
+	uint64_t links;         /* links stored */
+	uint64_t links_ss;      /* surface -> surface */
+	uint64_t links_sc;      /* involving one cluster */
+	uint64_t links_cc;      /* cluster -> cluster (incl. self-links) */
+	uint64_t links_light;   /* from point/spot/directional lights */
+	uint64_t links_active;  /* active (leaf) links */
+	uint64_t links_passive; /* passive links (hierarchy kept) */
+	uint64_t links_created; /* this iteration */
+	uint64_t links_deleted; /* this iteration */
+	uint64_t elements;      /* surface elements */
+	uint64_t clusters;
+	uint64_t leaves;        /* surface leaves (the mesh) */
+	uint64_t refinements;   /* element splits this iteration */
+	uint64_t rays;          /* shadow rays this iteration */
+	double residual;        /* relative change / unshot energy */
+	double error_estimate;  /* estimated remaining relative error */
+	int converged;          /* error_estimate below the tolerance */
+	rad_mem_report mem;     /* solver + scene memory */
+} rad_stats;
+
+typedef struct rad_solver rad_solver;
+
+rad_status rad_solver_new(const rad_scene *scene, const rad_options *opt,
+			  rad_solver **out, rad_error *err);
+
+/* One iteration (refine, gather, push-pull; or one sweep / batch of shots). */
+rad_status rad_solver_step(rad_solver *sv, rad_error *err);
+
+/* Step until error_estimate <= tol or max_iter iterations were done. */
+rad_status rad_solver_converge(rad_solver *sv, double tol, uint32_t max_iter,
+			       rad_error *err);
+
+/* Change the refinement threshold between iterations. */
+rad_status rad_solver_set_eps(rad_solver *sv, double eps, rad_error *err);
+
+void rad_solver_stats(const rad_solver *sv, rad_stats *out);
+
+/*
+ * Illuminance in lux at n points.  pts holds 6 doubles per point
+ * (x y z nx ny nz); the normal need not be unit length but must not be
+ * zero.  A point on a surface sees the side its normal points to.
+ */
+rad_status rad_solver_illuminance(const rad_solver *sv, const double *pts,
+				  size_t n, double *lux, rad_error *err);
+
+/* Per-leaf results, for export: calls fn once per leaf element. */
+typedef void (*rad_leaf_fn)(void *ud, uint32_t node, const double p[4][3],
+			    int nv, const double radiosity[3],
+			    const double irradiance[3]);
+void rad_solver_leaves(const rad_solver *sv, rad_leaf_fn fn, void *ud);
+
+void rad_solver_free(rad_solver *sv);
+
+/* Photopic weights used to turn RGB into one lux value. */
+#define RAD_LUMA_R 0.2126
+#define RAD_LUMA_G 0.7152
+#define RAD_LUMA_B 0.0722
+
+#ifdef __cplusplus
+}
+#endif
+#endif

@@ -1,0 +1,80 @@
+/*
+ * scene.h -- the engine's internal scene model.
+ *
+ * A committed scene is a read-only set of input polygons (triangles and
+ * parallelograms), a shared material table, punctual/directional lights
+ * and the Embree BVH over the polygons.  Solvers never modify it.
+ *
+ * A polygon is stored as an origin and two edge vectors:
+ *   triangle:      p0, p0+e1, p0+e2          (points p0 + s e1 + t e2,
+ *                                             s,t >= 0, s+t <= 1)
+ *   parallelogram: p0, p0+e1, p0+e1+e2, p0+e2 (s,t in [0,1])
+ * which is also how quadtree elements describe their sub-region, so the
+ * whole hierarchy shares one geometry representation.  The front side is
+ * the side of n = normalize(e1 x e2).
+ */
+#ifndef LUXRAD_SCENE_H
+#define LUXRAD_SCENE_H
+
+#include "mem.h"
+#include "rad.h"
+#include "vec.h"
+
+typedef struct rad_material {
+	float rho[3];  /* diffuse reflectance per channel, [0, 1) */
+	float emit[3]; /* exitance per channel, lux (pi x luminance) */
+} rad_material;
+
+typedef struct rad_poly {
+	float p0[3], e1[3], e2[3]; /* origin and edges (see above) */
+	float n[3];                /* unit normal, front side */
+	float area;                /* m2 */
+	uint32_t mat;              /* index into the material table */
+	uint32_t node;             /* index into the node name table */
+	uint8_t quad;              /* 1 = parallelogram, 0 = triangle */
+} rad_poly;
+
+typedef struct rad_light {
+	rad_light_kind kind;
+	double pos[3];       /* point, spot */
+	double dir[3];       /* unit; direction the light travels */
+	double intensity[3]; /* candela (point, spot), lux (directional) */
+	double range;        /* 0 = infinite */
+	double cos_inner, cos_outer; /* spot cone, cosines */
+	char *name;          /* may be NULL */
+} rad_light;
+
+typedef struct rad_vis rad_vis; /* vis.h */
+
+struct rad_scene {
+	rad_mem mem;           /* everything the scene holds */
+	int committed;
+
+	rad_poly *polys;       /* GEOMETRY */
+	uint32_t npolys, cap_polys;
+
+	rad_material *mats;    /* MATERIALS; shared, stored once each */
+	uint32_t nmats, cap_mats;
+
+	rad_light *lights;     /* LIGHTS */
+	uint32_t nlights, cap_lights;
+
+	char **nodes;          /* NAMES: node/mesh instance names */
+	uint32_t nnodes, cap_nodes;
+
+	double lo[3], hi[3];   /* bounds of polygons and positional lights */
+	double diag;           /* bounding-box diagonal, metres (> 0) */
+	double total_area;     /* m2 */
+	double total_flux[3];  /* lm emitted by surfaces and lights, estimate */
+
+	rad_scene_counts counts;
+	rad_vis *vis;          /* BVH over the polygons, after commit */
+};
+
+/* Position of parametric point (s,t) on a polygon. */
+static inline v3 rad_poly_point(const rad_poly *p, double s, double t)
+{
+	return v3_madd(v3_madd(v3_f(p->p0), v3_f(p->e1), s), v3_f(p->e2), t);
+}
+
+#endif

@@ -1,0 +1,60 @@
+/*
+ * solver.h -- what every solver shares: the hierarchy, counters, the
+ * thread pool, options and published statistics; and the table of solver
+ * implementations (matrix.c, progressive.c, hr.c).
+ */
+#ifndef LUXRAD_SOLVER_H
+#define LUXRAD_SOLVER_H
+
+#include "err.h"
+#include "hier.h"
+#include "par.h"
+#include "rad.h"
+
+typedef struct rad_solver_ops {
+	const char *name;
+	rad_status (*init)(rad_solver *sv, rad_error *err);
+	/* One iteration; fills the iteration-specific fields of sv->stats
+	 * (links, residual, error_estimate, rays...).  The caller times it,
+	 * counts memory and bumps sv->stats.iteration. */
+	rad_status (*step)(rad_solver *sv, rad_error *err);
+	void (*destroy)(rad_solver *sv); /* frees sv->impl */
+} rad_solver_ops;
+
+struct rad_solver {
+	const rad_scene *scene;
+	rad_options opt;
+	rad_mem mem;        /* everything this solver holds */
+	rad_hier h;         /* elements, clusters, links */
+	rad_par *par;       /* worker threads */
+	const rad_solver_ops *ops;
+	void *impl;         /* solver-private state, counted in mem */
+	rad_stats stats;    /* published after each step */
+	double flux_scale;  /* photopic flux of all sources (lm), > 0 */
+	double tol;         /* convergence tolerance for error_estimate */
+};
+
+extern const rad_solver_ops rad_solver_matrix_ops;
+extern const rad_solver_ops rad_solver_progressive_ops;
+extern const rad_solver_ops rad_solver_hr_ops;
+
+/* 1 if the caller's cancel flag is raised. */
+static inline int rad_solver_cancelled(const rad_solver *sv)
+{
+	return sv->opt.cancel && *sv->opt.cancel;
+}
+
+/* Report progress within an iteration (fraction in [0,1]). */
+static inline void rad_solver_progress(const rad_solver *sv, double f)
+{
+	if (sv->opt.progress)
+		sv->opt.progress(sv->opt.progress_ud, f);
+}
+
+/*
+ * Estimate the remaining relative error from the last two residuals of a
+ * linearly converging iteration: r_k q / (1 - q) with q = r_k / r_{k-1}.
+ */
+double rad_error_estimate(double r_prev, double r_now);
+
+#endif

@@ -1,0 +1,57 @@
+/*
+ * vis.h -- visibility through Embree 3.
+ *
+ * One Embree device and one committed scene per rad_scene, built at commit
+ * and shared read-only by every solver and thread.  Robust mode, build
+ * quality medium.  Bytes Embree allocates are counted as RAD_MEM_BVH in
+ * the scene's counters through the device memory monitor.
+ *
+ * Ray ends are trimmed by eps = RAD_VIS_EPS_REL x the scene's
+ * bounding-box diagonal, so results do not change when the whole scene is
+ * scaled: an endpoint that lies on a surface is moved off it by eps along
+ * the surface normal (towards the side the other endpoint is on) and the
+ * segment is shortened by eps at both ends.
+ *
+ * All queries are thread-safe and do no allocation.  Each thread that
+ * traces must first call rad_vis_thread_init() (sets flush-to-zero and
+ * denormals-are-zero, as Embree asks).
+ */
+#ifndef LUXRAD_VIS_H
+#define LUXRAD_VIS_H
+
+#include "rad.h"
+#include "scene.h"
+#include "vec.h"
+
+#define RAD_VIS_EPS_REL 1e-5
+
+/* Build s->vis from s->polys; counts BVH memory into s->mem. */
+rad_status rad_vis_build(rad_scene *s, rad_error *err);
+/* Release s->vis (BVH memory count returns to zero). */
+void rad_vis_free(rad_scene *s);
+
+void rad_vis_thread_init(void);
+
+/* The trimming distance for this scene, metres. */
+double rad_vis_eps(const rad_vis *v);
+
+/*
+ * 1 if the segment a -> b is unblocked.  na / nb are the surface normals
+ * at a / b, or NULL where the endpoint is not on a surface (light, cluster
+ * centre).  The trimming above is applied here.
+ */
+int rad_vis_segment(const rad_vis *v, v3 a, const v3 *na, v3 b,
+		    const v3 *nb);
+
+/* 1 if the ray from a (normal na or NULL) in unit direction d escapes to
+ * infinity (directional lights). */
+int rad_vis_ray_free(const rad_vis *v, v3 a, const v3 *na, v3 d);
+
+/*
+ * Nearest hit of a ray: returns the polygon index (into scene->polys) or
+ * UINT32_MAX for a miss; *t receives the distance.
+ */
+uint32_t rad_vis_first_hit(const rad_vis *v, v3 org, v3 dir, double tfar,
+			   double *t);
+
+#endif

@@ -1,0 +1,71 @@
+/*
+ * gltf.h -- glTF 2.0 import and export, the C face of the one C++ file
+ * (gltf.cc) that uses tinygltf.
+ *
+ * Import takes bytes (a .gltf JSON document with embedded data: URI
+ * buffers, or a .glb), never a path: external URIs are refused.  It builds
+ * and commits a rad_scene: every mesh primitive of mode TRIANGLES in the
+ * default scene (or all root nodes when there is none), with node
+ * transforms (matrix or TRS, nested) applied; materials from
+ * baseColorFactor (reflectance) and emissiveFactor x
+ * KHR_materials_emissive_strength (luminance, cd/m2); KHR_lights_punctual
+ * lights.  Malformed input gets RAD_ERR_INVALID and a message naming the
+ * accessor / mesh / node and what is wrong.
+ *
+ * Export writes triangle meshes with optional per-vertex COLOR_0 and a
+ * custom _ILLUMINANCE attribute (scalar float, lux) as GLB or .gltf bytes.
+ */
+#ifndef LUXRAD_GLTF_H
+#define LUXRAD_GLTF_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "../engine/rad.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+typedef struct rad_gltf_info {
+	uint32_t meshes, primitives, nodes;
+	uint32_t primitives_skipped; /* non-triangle modes (points, lines) */
+	uint32_t textures_ignored;   /* baseColorTexture etc. present */
+	uint32_t metallic_materials; /* metallicFactor > 0 (treated diffuse) */
+	char warnings[512];          /* tinygltf warnings, truncated */
+} rad_gltf_info;
+
+/*
+ * Parse bytes and build a committed scene.  info may be NULL.  On error
+ * *out is NULL and nothing is leaked.
+ */
+rad_status rad_gltf_load(const void *bytes, size_t len, rad_scene **out,
+			 rad_gltf_info *info, rad_error *err);
+
+typedef struct rad_gltf_mesh {
+	const char *name;       /* node and mesh name; may be NULL */
+	const float *position;  /* 3 floats per vertex */
+	const float *color;     /* COLOR_0, 3 floats per vertex (linear); NULL */
+	const float *illuminance; /* _ILLUMINANCE, 1 float per vertex; NULL */
+	const uint32_t *index;  /* 3 per triangle; NULL = non-indexed */
+	size_t nvertices, nindices;
+	double base_color[3];   /* reflectance */
+	double emissive[3];     /* emissiveFactor, in [0,1] */
+	double emissive_strength; /* KHR_materials_emissive_strength; 1 = none */
+} rad_gltf_mesh;
+
+typedef enum rad_gltf_format { RAD_GLTF_GLB = 0, RAD_GLTF_JSON } rad_gltf_format;
+
+/*
+ * Serialize meshes and lights.  *out is malloc'ed (caller frees with
+ * free()); JSON output embeds buffers as data: URIs.
+ */
+rad_status rad_gltf_write(const rad_gltf_mesh *meshes, size_t nmeshes,
+			  const rad_light_desc *lights, size_t nlights,
+			  rad_gltf_format fmt, void **out, size_t *outlen,
+			  rad_error *err);
+
+#ifdef __cplusplus
+}
+#endif
+#endif
