@@ -1,1 +1,906 @@
-/* placeholder: being written */
+/*
+ * luxrad_solve.c -- luxrad-solve, the offline batch tool.
+ *
+ * Loads one glTF scene (.gltf or .glb) from a file, runs one solver over it
+ * (a fixed number of iterations, or until the estimated error falls below
+ * a tolerance), queries illuminance at the points of an optional points
+ * file and prints either a readable report or one JSON object.  It is the
+ * engine's whole public API driven from a command line, so it is also what
+ * outside acceptance checks call: its options, output keys and exit codes
+ * are a stable interface.
+ *
+ * Options are one declarative table (cli_options below): the parser, the
+ * range checks and --help all read it, so an option cannot exist without
+ * being documented.  Exit codes: 0 ok, 1 scene / solve / I/O error (the
+ * engine's message on stderr), 2 usage (bad option, bad value, malformed
+ * points file).  In --json mode nothing but the JSON goes to stdout.
+ */
+#include <errno.h>
+#include <jansson.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "gltf.h"
+#include "rad.h"
+
+enum { EXIT_OKAY = 0, EXIT_SOLVE = 1, EXIT_USAGE = 2 };
+
+/*
+ * Default convergence: the solve stops when the engine's estimate of the
+ * remaining relative error is below 1e-3 (0.1 % of the converged
+ * illuminance, well under what a light meter resolves).  The iteration cap
+ * is generous so that scenes with reflectances near 1, which converge
+ * slowly, still get there; it only guards against a solver that stalls.
+ */
+#define DEFAULT_TOL 1e-3
+#define DEFAULT_MAX_ITER 10000u
+
+typedef struct cli_args {
+	const char *scene_path;
+	const char *points_path; /* NULL: no illuminance queries */
+	rad_options opt;
+	uint32_t iterations; /* > 0: exactly this many steps */
+	double tol;          /* converge mode: error_estimate target */
+	uint32_t max_iter;   /* converge mode: iteration cap */
+	int tol_given;       /* --converge seen (excludes --iterations) */
+	int max_iter_given;  /* --max-iterations seen (ditto) */
+	int json;            /* one JSON object on stdout */
+	int per_iteration;   /* a stats line on stderr after each step */
+	int help;
+} cli_args;
+
+/* How an option's value is parsed and where it is stored. */
+typedef enum opt_kind {
+	OPT_HELP,     /* --help */
+	OPT_FLAG_ON,  /* int field := 1 */
+	OPT_FLAG_OFF, /* int field := 0 */
+	OPT_DOUBLE,   /* double field, finite, within [lo, hi] */
+	OPT_INT,      /* int field, within [lo, hi] */
+	OPT_U32,      /* uint32_t field, within [lo, hi] */
+	OPT_STRING,   /* const char * field */
+	OPT_SOLVER,   /* rad_solver_kind field */
+	OPT_ORACLE,   /* rad_oracle field */
+} opt_kind;
+
+typedef struct cli_option {
+	const char *name;    /* long name without the leading "--" */
+	const char *metavar; /* NULL for flags */
+	opt_kind kind;
+	size_t off;       /* offset of the field in cli_args */
+	size_t seen_off;  /* offset of an int set to 1 when given, or 0 */
+	double lo, hi;    /* accepted range for numbers (inclusive) */
+	int excl;         /* bounds refused: 1 = lo (eps > 0), 2 = hi */
+	const char *help; /* one line; the default is added by --help */
+} cli_option;
+
+#define ARG(field) offsetof(cli_args, field)
+#define OPT(field) offsetof(cli_args, opt.field)
+
+static const cli_option cli_options[] = {
+        {"solver", "NAME", OPT_SOLVER, OPT(solver), 0, 0, 0, 0,
+         "matrix | progressive | hr (hierarchical radiosity)"},
+        {"eps", "X", OPT_DOUBLE, OPT(eps), 0, 0, 1e9, 1,
+         "refinement threshold, > 0; smaller is finer (see --oracle)"},
+        {"iterations", "N", OPT_U32, ARG(iterations), 0, 1, 1e9, 0,
+         "run exactly N iterations (excludes --converge)"},
+        {"converge", "R", OPT_DOUBLE, ARG(tol), ARG(tol_given), 0, 1, 1,
+         "iterate until the estimated relative error <= R"},
+        {"max-iterations", "N", OPT_U32, ARG(max_iter), ARG(max_iter_given), 1,
+         1e9, 0, "iteration cap when converging"},
+        {"threads", "N", OPT_INT, OPT(threads), 0, 0, 256, 0,
+         "worker threads, 0..256; 0 = one per core"},
+        {"points", "FILE", OPT_STRING, ARG(points_path), 0, 0, 0, 0,
+         "query illuminance at the points in FILE"},
+        {"json", NULL, OPT_FLAG_ON, ARG(json), 0, 0, 0, 0,
+         "print one JSON object on stdout instead of the report"},
+        {"per-iteration", NULL, OPT_FLAG_ON, ARG(per_iteration), 0, 0, 0, 0,
+         "print statistics to stderr after every iteration"},
+        {"oracle", "NAME", OPT_ORACLE, OPT(oracle), 0, 0, 0, 0,
+         "refinement test: bfa (flux) | bf (exitance) | f (form factor)"},
+        {"no-clustering", NULL, OPT_FLAG_OFF, OPT(clustering), 0, 0, 0, 0,
+         "hr: no volume clusters (every polygon pair linked)"},
+        {"min-edge", "X", OPT_DOUBLE, OPT(min_edge_rel), 0, 0, 1, 3,
+         "smallest element edge, fraction of the scene diagonal"},
+        {"mesh-edge", "X", OPT_DOUBLE, OPT(mesh_edge_rel), 0, 0, 1, 1,
+         "matrix/progressive mesh edge, fraction of the diagonal"},
+        {"rcv-samples", "N", OPT_INT, OPT(rcv_samples), 0, 1, 16, 0,
+         "receiver points per form factor (1..16)"},
+        {"vis-samples", "N", OPT_INT, OPT(vis_samples), 0, 1, 16, 0,
+         "shadow rays per receiver point (1..16)"},
+        {"help", NULL, OPT_HELP, ARG(help), 0, 0, 0, 0, "show this help"},
+};
+
+#define NOPTIONS (sizeof(cli_options) / sizeof(cli_options[0]))
+
+static const char *const oracle_names[] = {
+        [RAD_ORACLE_BFA] = "bfa",
+        [RAD_ORACLE_F] = "f",
+        [RAD_ORACLE_BF] = "bf",
+};
+
+/* Report a usage error on stderr; returns the usage exit code. */
+static int usage_error(const char *fmt, ...)
+        __attribute__((format(printf, 1, 2)));
+static int usage_error(const char *fmt, ...)
+{
+	va_list ap;
+	fputs("luxrad-solve: ", stderr);
+	va_start(ap, fmt);
+	vfprintf(stderr, fmt, ap);
+	va_end(ap);
+	fputs("\nTry 'luxrad-solve --help'.\n", stderr);
+	return EXIT_USAGE;
+}
+
+/* ------------------------------------------------------------------ help */
+
+/* The current value of a table option in a, as text for --help. */
+static void option_default(const cli_option *o, const cli_args *a, char *buf,
+                           size_t len)
+{
+	const char *p = (const char *)a + o->off;
+	buf[0] = '\0';
+	switch (o->kind) {
+	case OPT_DOUBLE:
+		snprintf(buf, len, "%g", *(const double *)p);
+		break;
+	case OPT_INT:
+		snprintf(buf, len, "%d", *(const int *)p);
+		break;
+	case OPT_U32: /* 0 = unset (--iterations): nothing to show */
+		if (*(const uint32_t *)p)
+			snprintf(buf, len, "%u", *(const uint32_t *)p);
+		break;
+	case OPT_SOLVER:
+		snprintf(buf, len, "%s",
+		         rad_solver_kind_name(*(const rad_solver_kind *)p));
+		break;
+	case OPT_ORACLE:
+		snprintf(buf, len, "%s", oracle_names[*(const rad_oracle *)p]);
+		break;
+	default:
+		break;
+	}
+}
+
+static void print_help(const cli_args *defaults)
+{
+	printf("Usage: luxrad-solve SCENE [options]\n\n"
+	       "Solve the diffuse interreflection of a glTF 2.0 scene (.gltf "
+	       "or .glb)\nand report illuminance and solver statistics.\n\n"
+	       "Options:\n");
+	for (size_t i = 0; i < NOPTIONS; i++) {
+		const cli_option *o = &cli_options[i];
+		char lhs[40], def[64];
+		snprintf(lhs, sizeof(lhs), "--%s%s%s", o->name,
+		         o->metavar ? " " : "", o->metavar ? o->metavar : "");
+		option_default(o, defaults, def, sizeof(def));
+		printf("  %-22s %s%s%s%s\n", lhs, o->help, def[0] ? " [" : "",
+		       def, def[0] ? "]" : "");
+	}
+	printf("\nWith neither --iterations nor --converge the solve runs "
+	       "until the\nestimated relative error is <= %g (at most %u "
+	       "iterations).\n\n"
+	       "--eps by oracle: bfa = fraction of the total emitted flux one "
+	       "link may\ncarry; bf = fraction of the largest exitance; f = "
+	       "form factor.\n\n"
+	       "Points file: one point per line, 'x y z nx ny nz': position in "
+	       "metres\nand the normal of the surface the point lies on (any "
+	       "non-zero length);\n'#' starts a comment, blank lines are "
+	       "ignored.\n\n"
+	       "Units: lengths in metres (glTF); illuminance in lux; emissive "
+	       "luminance\nin cd/m2; point and spot intensities in cd; "
+	       "directional lights in lux;\ntimes in seconds; memory in "
+	       "bytes.\n\n"
+	       "Output: a readable report (scene counts, per-iteration table, "
+	       "memory by\nstructure, lux per point), or with --json one "
+	       "object with keys\nilluminance_lux, iterations, seconds, links, "
+	       "elements, clusters, leaves,\nrays, memory_bytes, solver, eps, "
+	       "converged, error_estimate, scene,\nper_iteration.\n\n"
+	       "Exit status: 0 success; 1 scene, solve or I/O error (message "
+	       "on stderr);\n2 usage error (unknown option, bad value, "
+	       "malformed points file).\n",
+	       DEFAULT_TOL, DEFAULT_MAX_ITER);
+}
+
+/* --------------------------------------------------------------- parsing */
+
+/* Parse a whole string as a finite double; 0 on success. */
+static int parse_double(const char *s, double *out)
+{
+	char *end;
+	errno = 0;
+	double v = strtod(s, &end);
+	if (end == s || *end != '\0' || errno == ERANGE || !isfinite(v))
+		return -1;
+	*out = v;
+	return 0;
+}
+
+static int in_range(const cli_option *o, double v)
+{
+	if ((o->excl & 1) ? v <= o->lo : v < o->lo)
+		return 0;
+	return (o->excl & 2) ? v < o->hi : v <= o->hi;
+}
+
+/* Store value for option o into a; returns an exit code (0 = ok). */
+static int apply_value(const cli_option *o, const char *value, cli_args *a)
+{
+	char *p = (char *)a + o->off;
+	double v = 0;
+
+	switch (o->kind) {
+	case OPT_STRING:
+		*(const char **)p = value;
+		return 0;
+	case OPT_SOLVER:
+		if (rad_solver_kind_parse(value, (rad_solver_kind *)p) !=
+		    RAD_OK)
+			return usage_error("--%s: unknown solver '%s' (matrix, "
+			                   "progressive or hr)",
+			                   o->name, value);
+		return 0;
+	case OPT_ORACLE:
+		for (size_t i = 0; i < 3; i++) {
+			if (strcmp(value, oracle_names[i]) == 0) {
+				*(rad_oracle *)p = (rad_oracle)i;
+				return 0;
+			}
+		}
+		return usage_error("--%s: unknown oracle '%s' (bfa, bf or f)",
+		                   o->name, value);
+	default:
+		break;
+	}
+	if (parse_double(value, &v) != 0 || !in_range(o, v) ||
+	    (o->kind != OPT_DOUBLE && v != floor(v)))
+		return usage_error("--%s: invalid value '%s' (expected %s in "
+		                   "%c%g, %g%c)",
+		                   o->name, value,
+		                   o->kind == OPT_DOUBLE ? "a number"
+		                                         : "an integer",
+		                   (o->excl & 1) ? '(' : '[', o->lo, o->hi,
+		                   (o->excl & 2) ? ')' : ']');
+	if (o->kind == OPT_DOUBLE)
+		*(double *)p = v;
+	else if (o->kind == OPT_INT)
+		*(int *)p = (int)v;
+	else
+		*(uint32_t *)p = (uint32_t)v;
+	return 0;
+}
+
+static const cli_option *find_option(const char *name, size_t len)
+{
+	for (size_t i = 0; i < NOPTIONS; i++)
+		if (strlen(cli_options[i].name) == len &&
+		    strncmp(cli_options[i].name, name, len) == 0)
+			return &cli_options[i];
+	return NULL;
+}
+
+/* One "--name[=value]" at argv[*i]; may consume argv[*i + 1]. */
+static int parse_option(int argc, char **argv, int *i, cli_args *a)
+{
+	const char *arg = argv[*i] + 2;
+	const char *eq = strchr(arg, '=');
+	size_t len = eq ? (size_t)(eq - arg) : strlen(arg);
+	const cli_option *o = find_option(arg, len);
+	const char *value = eq ? eq + 1 : NULL;
+
+	if (!o)
+		return usage_error("unknown option '%s'", argv[*i]);
+	if (o->seen_off)
+		*(int *)((char *)a + o->seen_off) = 1;
+	if (!o->metavar) {
+		if (value)
+			return usage_error("--%s takes no value", o->name);
+		*(int *)((char *)a + o->off) = o->kind != OPT_FLAG_OFF;
+		return 0;
+	}
+	if (!value) {
+		if (*i + 1 >= argc)
+			return usage_error("--%s needs a value (%s)", o->name,
+			                   o->metavar);
+		value = argv[++*i];
+	}
+	return apply_value(o, value, a);
+}
+
+/* Options that only make sense together, checked after parsing. */
+static int check_combination(const cli_args *a)
+{
+	if (a->iterations && (a->tol_given || a->max_iter_given))
+		return usage_error("--iterations runs a fixed number of steps; "
+		                   "it cannot be combined with %s",
+		                   a->tol_given ? "--converge"
+		                                : "--max-iterations");
+	if (!a->scene_path)
+		return usage_error("no scene file given");
+	return 0;
+}
+
+static int parse_args(int argc, char **argv, cli_args *a)
+{
+	int only_positional = 0;
+	for (int i = 1; i < argc; i++) {
+		const char *s = argv[i];
+		int rc;
+		if (!only_positional && strcmp(s, "--") == 0) {
+			only_positional = 1;
+		} else if (!only_positional && strncmp(s, "--", 2) == 0) {
+			rc = parse_option(argc, argv, &i, a);
+			if (rc != 0 || a->help)
+				return rc;
+		} else if (!only_positional && s[0] == '-' && s[1] != '\0') {
+			if (strcmp(s, "-h") == 0) {
+				a->help = 1;
+				return 0;
+			}
+			return usage_error("unknown option '%s'", s);
+		} else if (a->scene_path) {
+			return usage_error("more than one scene given ('%s', "
+			                   "'%s')",
+			                   a->scene_path, s);
+		} else {
+			a->scene_path = s;
+		}
+	}
+	return check_combination(a);
+}
+
+/* ----------------------------------------------------------------- input */
+
+/* Read a whole file; *out is malloc'ed.  Prints the error itself. */
+static int read_file(const char *path, unsigned char **out, size_t *len)
+{
+	FILE *f = fopen(path, "rb");
+	unsigned char *buf = NULL;
+	size_t n = 0, cap = 0;
+
+	if (!f) {
+		fprintf(stderr, "luxrad-solve: cannot open '%s': %s\n", path,
+		        strerror(errno));
+		return EXIT_SOLVE;
+	}
+	for (;;) {
+		if (n == cap) {
+			size_t ncap = cap ? 2 * cap : (size_t)1 << 16;
+			unsigned char *nb = realloc(buf, ncap);
+			if (!nb) {
+				fprintf(stderr,
+				        "luxrad-solve: out of memory "
+				        "reading '%s'\n",
+				        path);
+				break;
+			}
+			buf = nb;
+			cap = ncap;
+		}
+		size_t got = fread(buf + n, 1, cap - n, f);
+		n += got;
+		if (got == 0)
+			break;
+	}
+	if (n < cap && ferror(f)) {
+		fprintf(stderr, "luxrad-solve: cannot read '%s': %s\n", path,
+		        strerror(errno));
+	} else if (n < cap) {
+		fclose(f);
+		*out = buf;
+		*len = n;
+		return EXIT_OKAY;
+	}
+	fclose(f);
+	free(buf);
+	return EXIT_SOLVE;
+}
+
+typedef struct point_list {
+	double *xyz; /* 6 doubles per point: position, normal */
+	size_t n, cap;
+} point_list;
+
+/*
+ * Parse one points-file line into p (comments already cut).  Returns 1 for
+ * a point, 0 for a blank line, -1 with a reason in *why if malformed.
+ */
+static int parse_point_line(char *line, double p[6], const char **why)
+{
+	char *s = line, *end;
+	int k = 0;
+
+	for (;;) {
+		while (*s == ' ' || *s == '\t' || *s == '\r' || *s == '\n')
+			s++;
+		if (*s == '\0')
+			break;
+		if (k == 6) {
+			*why = "more than 6 numbers";
+			return -1;
+		}
+		errno = 0;
+		p[k] = strtod(s, &end);
+		if (end == s || !isfinite(p[k]) || errno == ERANGE ||
+		    (*end && !strchr(" \t\r\n", *end))) {
+			*why = "not a finite number";
+			return -1;
+		}
+		k++;
+		s = end;
+	}
+	if (k == 0)
+		return 0;
+	if (k != 6) {
+		*why = "expected 6 numbers: x y z nx ny nz";
+		return -1;
+	}
+	if (p[3] == 0 && p[4] == 0 && p[5] == 0) {
+		*why = "the normal is zero";
+		return -1;
+	}
+	return 1;
+}
+
+static int points_push(point_list *pl, const double p[6])
+{
+	if (pl->n == pl->cap) {
+		size_t ncap = pl->cap ? 2 * pl->cap : 64;
+		double *nx = realloc(pl->xyz, ncap * 6 * sizeof(double));
+		if (!nx)
+			return -1;
+		pl->xyz = nx;
+		pl->cap = ncap;
+	}
+	memcpy(pl->xyz + 6 * pl->n++, p, 6 * sizeof(double));
+	return 0;
+}
+
+/* Load a points file; malformed lines are usage errors naming file:line. */
+static int load_points(const char *path, point_list *pl)
+{
+	FILE *f = fopen(path, "r");
+	char *line = NULL;
+	size_t cap = 0;
+	unsigned long lineno = 0;
+	int rc = EXIT_OKAY;
+
+	if (!f) {
+		fprintf(stderr,
+		        "luxrad-solve: cannot open points file '%s': "
+		        "%s\n",
+		        path, strerror(errno));
+		return EXIT_SOLVE;
+	}
+	while (rc == EXIT_OKAY && getline(&line, &cap, f) != -1) {
+		double p[6];
+		const char *why = NULL;
+		char *hash = strchr(line, '#');
+		lineno++;
+		if (hash)
+			*hash = '\0';
+		int r = parse_point_line(line, p, &why);
+		if (r < 0) {
+			fprintf(stderr, "luxrad-solve: %s:%lu: %s\n", path,
+			        lineno, why);
+			rc = EXIT_USAGE;
+		} else if (r > 0 && points_push(pl, p) != 0) {
+			fprintf(stderr, "luxrad-solve: out of memory\n");
+			rc = EXIT_SOLVE;
+		}
+	}
+	if (rc == EXIT_OKAY && ferror(f)) {
+		fprintf(stderr, "luxrad-solve: cannot read '%s'\n", path);
+		rc = EXIT_SOLVE;
+	}
+	free(line);
+	fclose(f);
+	return rc;
+}
+
+/* ----------------------------------------------------------------- solve */
+
+typedef struct run_log {
+	rad_stats *it; /* stats after each iteration, in order */
+	size_t n, cap;
+	uint64_t rays;        /* sum over iterations */
+	double load_seconds;  /* parse + scene build + BVH */
+	double solve_seconds; /* wall time of all iterations */
+	int converged;
+} run_log;
+
+static double now_seconds(void)
+{
+	struct timespec ts;
+	clock_gettime(CLOCK_MONOTONIC, &ts);
+	return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+static int log_push(run_log *lg, const rad_stats *st)
+{
+	if (lg->n == lg->cap) {
+		size_t ncap = lg->cap ? 2 * lg->cap : 32;
+		rad_stats *nit = realloc(lg->it, ncap * sizeof(*nit));
+		if (!nit)
+			return -1;
+		lg->it = nit;
+		lg->cap = ncap;
+	}
+	lg->it[lg->n++] = *st;
+	lg->rays += st->rays;
+	return 0;
+}
+
+static void print_progress(const rad_stats *st)
+{
+	fprintf(stderr,
+	        "iteration %u: %.3f s, %llu links, %llu elements, %llu "
+	        "leaves, residual %.3g, error %.3g, %lld bytes\n",
+	        st->iteration, st->seconds, (unsigned long long)st->links,
+	        (unsigned long long)st->elements,
+	        (unsigned long long)st->leaves, st->residual,
+	        st->error_estimate, (long long)st->mem.total);
+}
+
+/*
+ * Run the solver.  Every iteration goes through rad_solver_converge with a
+ * cap of one step, so that the engine judges convergence against our
+ * tolerance in both modes while every iteration's statistics are kept;
+ * --iterations simply never stops early.
+ */
+static int run_solver(rad_solver *sv, const cli_args *a, run_log *lg,
+                      rad_error *err)
+{
+	uint32_t limit = a->iterations ? a->iterations : a->max_iter;
+	double t0 = now_seconds();
+	rad_stats st = {0};
+
+	for (uint32_t i = 0; i < limit; i++) {
+		if (rad_solver_converge(sv, a->tol, 1, err) != RAD_OK)
+			return -1;
+		rad_solver_stats(sv, &st);
+		if (log_push(lg, &st) != 0) {
+			snprintf(err->msg, sizeof(err->msg), "out of memory");
+			return -1;
+		}
+		if (a->per_iteration)
+			print_progress(&st);
+		if (!a->iterations && st.converged)
+			break;
+	}
+	lg->solve_seconds = now_seconds() - t0;
+	lg->converged = st.converged;
+	return 0;
+}
+
+/* ---------------------------------------------------------------- output */
+
+/* jansson refuses NaN and infinities: those become null. */
+static json_t *jreal(double v)
+{
+	return isfinite(v) ? json_real(v) : json_null();
+}
+
+static json_t *jint(uint64_t v)
+{
+	return json_integer((json_int_t)v);
+}
+
+static json_t *json_memory(const rad_mem_report *m)
+{
+	json_t *o = json_object();
+	json_object_set_new(o, "total", json_integer(m->total));
+	for (int k = 0; k < RAD_MEM_NKINDS; k++)
+		json_object_set_new(o, rad_mem_kind_name((rad_mem_kind)k),
+		                    json_integer(m->bytes[k]));
+	return o;
+}
+
+/*
+ * The integer counters written as-is under their field names, one list
+ * per struct so that the JSON keys are the names documented in rad.h.
+ */
+/* clang-format off */
+#define STATS_COUNTERS(X)                                                      \
+	X(iteration) X(links) X(links_ss) X(links_sc) X(links_cc)              \
+	X(links_light) X(links_active) X(links_passive) X(links_created)       \
+	X(links_deleted) X(elements) X(clusters) X(leaves) X(refinements)      \
+	X(rays)
+#define SCENE_COUNTERS(X)                                                      \
+	X(triangles_in) X(triangles_nonfinite) X(triangles_degenerate)         \
+	X(polygons) X(quads) X(materials) X(materials_offered) X(lights)       \
+	X(emitters) X(nodes)
+#define GLTF_COUNTERS(X)                                                       \
+	X(meshes) X(primitives) X(primitives_skipped) X(textures_ignored)      \
+	X(metallic_materials)
+/* clang-format on */
+
+static json_t *json_iteration(const rad_stats *s)
+{
+	json_t *o = json_object();
+#define SET_(f) json_object_set_new(o, #f, jint(s->f));
+	STATS_COUNTERS(SET_)
+#undef SET_
+	json_object_set_new(o, "seconds", jreal(s->seconds));
+	json_object_set_new(o, "residual", jreal(s->residual));
+	json_object_set_new(o, "error_estimate", jreal(s->error_estimate));
+	json_object_set_new(o, "memory_bytes", json_memory(&s->mem));
+	return o;
+}
+
+static json_t *json_vec3(const double v[3])
+{
+	json_t *a = json_array();
+	for (int i = 0; i < 3; i++)
+		json_array_append_new(a, jreal(v[i]));
+	return a;
+}
+
+static json_t *json_scene(const rad_scene *sc, const rad_scene_counts *c,
+                          const rad_gltf_info *g)
+{
+	json_t *o = json_object();
+	double lo[3], hi[3];
+
+	rad_scene_bounds(sc, lo, hi);
+	json_object_set_new(o, "bounds_min", json_vec3(lo));
+	json_object_set_new(o, "bounds_max", json_vec3(hi));
+#define SET_(f) json_object_set_new(o, #f, jint(c->f));
+	SCENE_COUNTERS(SET_)
+#undef SET_
+#define SET_(f) json_object_set_new(o, #f, jint(g->f));
+	GLTF_COUNTERS(SET_)
+#undef SET_
+	json_object_set_new(o, "warnings", json_string(g->warnings));
+	return o;
+}
+
+/* Everything the run produced, gathered for the two printers. */
+typedef struct report {
+	const cli_args *a;
+	const rad_scene *scene;
+	const rad_scene_counts *counts;
+	const rad_gltf_info *info;
+	const run_log *lg;
+	const rad_stats *final; /* stats after the last iteration */
+	const double *pts;      /* 6 per point, as read */
+	const double *lux;      /* one per point */
+	size_t npoints;
+} report;
+
+static int print_json(const report *r)
+{
+	const rad_stats *s = r->final;
+	json_t *o = json_object(), *lux = json_array(), *its = json_array();
+
+	for (size_t i = 0; i < r->npoints; i++)
+		json_array_append_new(lux, jreal(r->lux[i]));
+	for (size_t i = 0; i < r->lg->n; i++)
+		json_array_append_new(its, json_iteration(&r->lg->it[i]));
+	json_object_set_new(o, "illuminance_lux", lux);
+	json_object_set_new(
+	        o, "solver",
+	        json_string(rad_solver_kind_name(r->a->opt.solver)));
+	json_object_set_new(o, "eps", jreal(r->a->opt.eps));
+	json_object_set_new(o, "iterations", jint(s->iteration));
+	json_object_set_new(o, "seconds", jreal(r->lg->solve_seconds));
+	json_object_set_new(o, "load_seconds", jreal(r->lg->load_seconds));
+	json_object_set_new(o, "converged", json_boolean(r->lg->converged));
+	json_object_set_new(o, "tolerance", jreal(r->a->tol));
+	json_object_set_new(o, "error_estimate", jreal(s->error_estimate));
+	json_object_set_new(o, "links", jint(s->links));
+	json_object_set_new(o, "elements", jint(s->elements));
+	json_object_set_new(o, "clusters", jint(s->clusters));
+	json_object_set_new(o, "leaves", jint(s->leaves));
+	json_object_set_new(o, "rays", jint(r->lg->rays));
+	json_object_set_new(o, "memory_bytes", json_memory(&s->mem));
+	json_object_set_new(o, "memory_peak_bytes",
+	                    json_integer(s->mem.peak_total));
+	json_object_set_new(o, "scene",
+	                    json_scene(r->scene, r->counts, r->info));
+	json_object_set_new(o, "per_iteration", its);
+
+	int rc =
+	        json_dumpf(o, stdout, JSON_INDENT(2) | JSON_REAL_PRECISION(17));
+	json_decref(o);
+	if (rc != 0 || fputc('\n', stdout) == EOF)
+		return EXIT_SOLVE;
+	return EXIT_OKAY;
+}
+
+static void print_text_scene(const report *r)
+{
+	const rad_scene_counts *c = r->counts;
+	printf("scene %s\n", r->a->scene_path);
+	printf("  triangles %u (skipped: %u non-finite, %u degenerate), "
+	       "polygons %u (%u quads)\n",
+	       c->triangles_in, c->triangles_nonfinite, c->triangles_degenerate,
+	       c->polygons, c->quads);
+	printf("  materials %u (of %u offered), emitters %u, lights %u, "
+	       "nodes %u\n",
+	       c->materials, c->materials_offered, c->emitters, c->lights,
+	       c->nodes);
+	printf("  meshes %u, primitives %u (%u skipped), loaded in %.3f s\n",
+	       r->info->meshes, r->info->primitives,
+	       r->info->primitives_skipped, r->lg->load_seconds);
+	if (r->info->warnings[0])
+		printf("  glTF warnings: %s\n", r->info->warnings);
+}
+
+static void print_text_iterations(const report *r)
+{
+	printf("\nsolver %s, eps %g\n", rad_solver_kind_name(r->a->opt.solver),
+	       r->a->opt.eps);
+	printf("%5s %9s %10s %10s %9s %10s %8s %11s %10s %10s %12s\n", "iter",
+	       "seconds", "links", "elements", "clusters", "leaves", "refine",
+	       "rays", "residual", "error", "memory");
+	for (size_t i = 0; i < r->lg->n; i++) {
+		const rad_stats *s = &r->lg->it[i];
+		printf("%5u %9.3f %10llu %10llu %9llu %10llu %8llu %11llu "
+		       "%10.3g %10.3g %12lld\n",
+		       s->iteration, s->seconds, (unsigned long long)s->links,
+		       (unsigned long long)s->elements,
+		       (unsigned long long)s->clusters,
+		       (unsigned long long)s->leaves,
+		       (unsigned long long)s->refinements,
+		       (unsigned long long)s->rays, s->residual,
+		       s->error_estimate, (long long)s->mem.total);
+	}
+	printf("%s after %u iterations in %.3f s (error estimate %.3g, "
+	       "tolerance %g)\n",
+	       r->lg->converged ? "converged" : "NOT converged",
+	       r->final->iteration, r->lg->solve_seconds,
+	       r->final->error_estimate, r->a->tol);
+	printf("links %llu (ss %llu, sc %llu, cc %llu, light %llu), "
+	       "rays %llu\n",
+	       (unsigned long long)r->final->links,
+	       (unsigned long long)r->final->links_ss,
+	       (unsigned long long)r->final->links_sc,
+	       (unsigned long long)r->final->links_cc,
+	       (unsigned long long)r->final->links_light,
+	       (unsigned long long)r->lg->rays);
+}
+
+static void print_text(const report *r)
+{
+	const rad_mem_report *m = &r->final->mem;
+
+	print_text_scene(r);
+	print_text_iterations(r);
+	printf("\nmemory by structure (bytes)\n");
+	for (int k = 0; k < RAD_MEM_NKINDS; k++)
+		printf("  %-18s %14lld\n", rad_mem_kind_name((rad_mem_kind)k),
+		       (long long)m->bytes[k]);
+	printf("  %-18s %14lld (peak %lld)\n", "total", (long long)m->total,
+	       (long long)m->peak_total);
+	if (r->npoints)
+		printf("\nilluminance (lux)\n");
+	for (size_t i = 0; i < r->npoints; i++) {
+		const double *p = r->pts + 6 * i;
+		printf("  (%g %g %g) n (%g %g %g): %.6g\n", p[0], p[1], p[2],
+		       p[3], p[4], p[5], r->lux[i]);
+	}
+}
+
+/* ------------------------------------------------------------------ main */
+
+static int engine_error(const char *what, const rad_error *err)
+{
+	fprintf(stderr, "luxrad-solve: %s: %s: %s\n", what,
+	        rad_status_name(err->code), err->msg[0] ? err->msg : "failed");
+	return EXIT_SOLVE;
+}
+
+static int load_scene(const char *path, rad_scene **sc, rad_gltf_info *info,
+                      double *seconds)
+{
+	unsigned char *bytes = NULL;
+	size_t len = 0;
+	rad_error err = {0};
+	int rc = read_file(path, &bytes, &len);
+
+	if (rc != EXIT_OKAY)
+		return rc;
+	double t0 = now_seconds();
+	rad_status st = rad_gltf_load(bytes, len, sc, info, &err);
+	*seconds = now_seconds() - t0;
+	free(bytes);
+	if (st != RAD_OK) {
+		fprintf(stderr, "luxrad-solve: %s: %s: %s\n", path,
+		        rad_status_name(err.code), err.msg);
+		return EXIT_SOLVE;
+	}
+	return EXIT_OKAY;
+}
+
+/* Solve the loaded scene, query the points and print the report. */
+static int solve_and_report(const cli_args *a, const rad_scene *sc,
+                            const rad_gltf_info *info, const point_list *pl,
+                            double load_seconds)
+{
+	rad_solver *sv = NULL;
+	rad_error err = {0};
+	run_log lg = {.load_seconds = load_seconds};
+	rad_scene_counts counts;
+	rad_stats final;
+	double *lux = calloc(pl->n ? pl->n : 1, sizeof(double));
+	int rc = EXIT_SOLVE;
+
+	if (!lux) {
+		fprintf(stderr, "luxrad-solve: out of memory\n");
+		return EXIT_SOLVE;
+	}
+	if (rad_solver_new(sc, &a->opt, &sv, &err) != RAD_OK) {
+		rc = engine_error("cannot make the solver", &err);
+	} else if (run_solver(sv, a, &lg, &err) != 0) {
+		rc = engine_error("solve failed", &err);
+	} else if (pl->n && rad_solver_illuminance(sv, pl->xyz, pl->n, lux,
+	                                           &err) != RAD_OK) {
+		rc = engine_error("illuminance query failed", &err);
+	} else {
+		rad_solver_stats(sv, &final);
+		rad_scene_counts_get(sc, &counts);
+		report r = {.a = a,
+		            .scene = sc,
+		            .counts = &counts,
+		            .info = info,
+		            .lg = &lg,
+		            .final = &final,
+		            .pts = pl->xyz,
+		            .lux = lux,
+		            .npoints = pl->n};
+		if (a->json) {
+			rc = print_json(&r);
+		} else {
+			print_text(&r);
+			rc = EXIT_OKAY;
+		}
+		if (!lg.converged && !a->iterations)
+			fprintf(stderr,
+			        "luxrad-solve: warning: not converged "
+			        "after %u iterations\n",
+			        final.iteration);
+	}
+	rad_solver_free(sv);
+	free(lg.it);
+	free(lux);
+	return rc;
+}
+
+int main(int argc, char **argv)
+{
+	cli_args a = {.tol = DEFAULT_TOL, .max_iter = DEFAULT_MAX_ITER};
+	point_list pl = {0};
+	rad_scene *sc = NULL;
+	rad_gltf_info info = {0};
+	double load_seconds = 0;
+
+	rad_options_default(&a.opt);
+	int rc = parse_args(argc, argv, &a);
+	if (rc != EXIT_OKAY)
+		return rc;
+	if (a.help) {
+		print_help(&a);
+		return EXIT_OKAY;
+	}
+	if (a.points_path)
+		rc = load_points(a.points_path, &pl);
+	if (rc == EXIT_OKAY)
+		rc = load_scene(a.scene_path, &sc, &info, &load_seconds);
+	if (rc == EXIT_OKAY)
+		rc = solve_and_report(&a, sc, &info, &pl, load_seconds);
+	rad_scene_free(sc);
+	free(pl.xyz);
+	if (fflush(stdout) != 0 || ferror(stdout)) {
+		fprintf(stderr, "luxrad-solve: cannot write the output\n");
+		rc = EXIT_SOLVE;
+	}
+	return rc;
+}

@@ -10,7 +10,7 @@
 #include "rad.h"
 
 rad_status rad_fail(rad_error *err, rad_status code, const char *fmt, ...)
-	__attribute__((format(printf, 3, 4)));
+        __attribute__((format(printf, 3, 4)));
 
 /* Mark err as success (code RAD_OK, empty message). */
 void rad_error_clear(rad_error *err);

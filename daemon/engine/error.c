@@ -7,14 +7,14 @@
 #include "err.h"
 
 static const char *const status_names[] = {
-	[RAD_OK] = "ok",
-	[RAD_ERR_NOMEM] = "nomem",
-	[RAD_ERR_INVALID] = "invalid",
-	[RAD_ERR_UNSUPPORTED] = "unsupported",
-	[RAD_ERR_STATE] = "state",
-	[RAD_ERR_EMBREE] = "embree",
-	[RAD_ERR_CANCELLED] = "cancelled",
-	[RAD_ERR_LIMIT] = "limit",
+        [RAD_OK] = "ok",
+        [RAD_ERR_NOMEM] = "nomem",
+        [RAD_ERR_INVALID] = "invalid",
+        [RAD_ERR_UNSUPPORTED] = "unsupported",
+        [RAD_ERR_STATE] = "state",
+        [RAD_ERR_EMBREE] = "embree",
+        [RAD_ERR_CANCELLED] = "cancelled",
+        [RAD_ERR_LIMIT] = "limit",
 };
 
 const char *rad_status_name(rad_status st)

@@ -32,16 +32,18 @@ typedef struct rad_patch {
 
 void rad_patch_from_poly(rad_patch *p, const rad_poly *poly);
 void rad_patch_from_floats(rad_patch *p, const float p0[3], const float e1[3],
-			   const float e2[3], int quad);
+                           const float e2[3], int quad);
 v3 rad_patch_centroid(const rad_patch *p);
 /* Vertices in order (3 or 4); returns the count. */
 int rad_patch_vertices(const rad_patch *p, v3 out[4]);
 
 /*
  * n deterministic sample points (1 <= n <= RAD_FF_MAX_SAMPLES) spread over
- * the patch with equal weights (stratified: each point is the centroid of
- * one of n equal-area cells where n is 1, 4 or 16; other n are served from
- * the next larger pattern).  Returns the number of points written.
+ * the patch with equal weights (stratified: one point in each of n
+ * equal-area cells where n is 1, 4 or 16 -- the centroid for 1, a rule
+ * exact for quadratics over the patch for 4, and over each quarter for 16;
+ * other n are served from the next larger pattern).  Returns the number
+ * of points written.
  */
 int rad_patch_samples(const rad_patch *p, int n, v3 *out);
 
@@ -62,8 +64,17 @@ double rad_ff_unoccluded(const rad_patch *r, const rad_patch *s, int nrcv);
  * incremented by the number of rays traced.  vis may be NULL (no
  * occluders: unoccluded result).
  */
-double rad_ff_patch(const rad_vis *vis, const rad_patch *r,
-		    const rad_patch *s, int nrcv, int nvis, uint64_t *rays);
+double rad_ff_patch(const rad_vis *vis, const rad_patch *r, const rad_patch *s,
+                    int nrcv, int nvis, uint64_t *rays);
+
+/*
+ * The same, and the spread (max - min) of the per-point values over the
+ * receiver points in *spread (may be NULL): how far the receiver is from
+ * seeing the source uniformly, the refinement oracles' error measure.
+ */
+double rad_ff_patch_spread(const rad_vis *vis, const rad_patch *r,
+                           const rad_patch *s, int nrcv, int nvis,
+                           uint64_t *rays, double *spread);
 
 /*
  * Irradiance (lux per unit intensity, scalar geometry factor) that light L
@@ -71,11 +82,16 @@ double rad_ff_patch(const rad_vis *vis, const rad_patch *r,
  * Multiply by L->intensity[c] for channel c.  nx may face away: 0.
  */
 double rad_light_point(const rad_vis *vis, const rad_light *L, v3 x, v3 nx,
-		       uint64_t *rays);
+                       uint64_t *rays);
 
 /* Same, averaged over nrcv points of patch r. */
 double rad_light_patch(const rad_vis *vis, const rad_light *L,
-		       const rad_patch *r, int nrcv, uint64_t *rays);
+                       const rad_patch *r, int nrcv, uint64_t *rays);
+
+/* Same, with the spread over the receiver points (see above). */
+double rad_light_patch_spread(const rad_vis *vis, const rad_light *L,
+                              const rad_patch *r, int nrcv, uint64_t *rays,
+                              double *spread);
 
 /* Unoccluded estimate of rad_light_patch at the centroid (for oracles). */
 double rad_light_estimate(const rad_light *L, const rad_patch *r);

@@ -1,1 +1,396 @@
-/* placeholder: being written */
+/*
+ * hier.c -- element quadtrees, the cluster tree, and the link store
+ * (see the DESIGN note in hier.h).
+ *
+ * The cluster tree is built top-down by median splits of polygon centroids
+ * along the longest axis of their bounds, so it is balanced (depth
+ * log2(n/4)) and deterministic: the same scene always gives the same tree.
+ * Polygons are permuted into order[] so every cluster covers one range.
+ */
+#include "hier.h"
+
+#include <float.h>
+#include <string.h>
+
+#include "err.h"
+
+static v3 poly_centroid(const rad_poly *p)
+{
+	/* Triangle: (p0 + p1 + p2)/3; parallelogram: p0 + (e1 + e2)/2. */
+	double w = p->quad ? 0.5 : 1.0 / 3.0;
+	return v3_madd(v3_madd(v3_f(p->p0), v3_f(p->e1), w), v3_f(p->e2), w);
+}
+
+static void poly_bounds(const rad_poly *p, float lo[3], float hi[3])
+{
+	v3 a = v3_f(p->p0), b = v3_add(a, v3_f(p->e1)),
+	   c = v3_add(a, v3_f(p->e2));
+	v3 d = v3_add(b, v3_f(p->e2));
+	v3 pts[4] = {a, b, c, d};
+	int n = p->quad ? 4 : 3;
+	for (int i = 0; i < n; i++) {
+		double q[3] = {pts[i].x, pts[i].y, pts[i].z};
+		for (int k = 0; k < 3; k++) {
+			if ((float)q[k] < lo[k])
+				lo[k] = (float)q[k];
+			if ((float)q[k] > hi[k])
+				hi[k] = (float)q[k];
+		}
+	}
+}
+
+static double axis_of(v3 v, int axis)
+{
+	return axis == 0 ? v.x : axis == 1 ? v.y : v.z;
+}
+
+/* Quickselect: order[lo..hi) partially sorted so that the element at k
+ * has the k-th smallest key (ties broken by polygon id: deterministic). */
+static void select_kth(const rad_scene *s, uint32_t *order, uint32_t lo,
+                       uint32_t hi, uint32_t k, int axis)
+{
+	while (hi - lo > 1) {
+		uint32_t mid = lo + (hi - lo) / 2;
+		uint32_t pivot = order[mid];
+		double pk = axis_of(poly_centroid(&s->polys[pivot]), axis);
+		/* Three-way partition around (pk, pivot id). */
+		uint32_t lt = lo, i = lo, gt = hi;
+		while (i < gt) {
+			uint32_t id = order[i];
+			double key =
+			        axis_of(poly_centroid(&s->polys[id]), axis);
+			int cmp = key < pk   ? -1
+			          : key > pk ? 1
+			                     : (id < pivot ? -1 : id > pivot);
+			if (cmp < 0) {
+				order[i++] = order[lt];
+				order[lt++] = id;
+			} else if (cmp > 0) {
+				order[i] = order[--gt];
+				order[gt] = id;
+			} else {
+				i++;
+			}
+		}
+		if (k < lt)
+			hi = lt;
+		else if (k >= gt)
+			lo = gt;
+		else
+			return;
+	}
+}
+
+/* Fill cluster c (range already set): bounds, area; split if large. */
+static rad_status build_cluster(rad_hier *h, uint32_t c, rad_error *err)
+{
+	const rad_scene *s = h->scene;
+	rad_cluster *cl = rad_cluster_at(h, c);
+	for (int k = 0; k < 3; k++) {
+		cl->lo[k] = FLT_MAX;
+		cl->hi[k] = -FLT_MAX;
+	}
+	double area = 0, clo[3] = {DBL_MAX, DBL_MAX, DBL_MAX};
+	double chi[3] = {-DBL_MAX, -DBL_MAX, -DBL_MAX};
+	for (uint32_t i = cl->first; i < cl->first + cl->count; i++) {
+		const rad_poly *p = &s->polys[h->order[i]];
+		poly_bounds(p, cl->lo, cl->hi);
+		area += p->area;
+		v3 m = poly_centroid(p);
+		double q[3] = {m.x, m.y, m.z};
+		for (int k = 0; k < 3; k++) {
+			clo[k] = q[k] < clo[k] ? q[k] : clo[k];
+			chi[k] = q[k] > chi[k] ? q[k] : chi[k];
+		}
+	}
+	cl->area = (float)area;
+	cl->child = RAD_NONE;
+	cl->links = RAD_NONE;
+	if (cl->count <= RAD_CLUSTER_LEAF_MAX)
+		return RAD_OK;
+	int axis = 0;
+	for (int k = 1; k < 3; k++)
+		if (chi[k] - clo[k] > chi[axis] - clo[axis])
+			axis = k;
+	uint32_t first = cl->first, count = cl->count;
+	uint32_t half = count / 2;
+	select_kth(s, h->order, first, first + count, first + half, axis);
+	uint32_t kids = rad_pool_add(&h->clusters, 2);
+	if (kids == RAD_NONE)
+		return rad_fail(err, RAD_ERR_NOMEM,
+		                "cluster tree: out of memory");
+	cl = rad_cluster_at(h, c); /* records never move; reload for clarity */
+	cl->child = kids;
+	rad_cluster *a = rad_cluster_at(h, kids),
+	            *b = rad_cluster_at(h, kids + 1);
+	a->parent = b->parent = c;
+	a->first = first;
+	a->count = half;
+	b->first = first + half;
+	b->count = count - half;
+	rad_status st = build_cluster(h, kids, err);
+	return st ? st : build_cluster(h, kids + 1, err);
+}
+
+static uint32_t shift_for(uint32_t n)
+{
+	uint32_t s = 10;
+	while (s < 30 && (1u << s) < n)
+		s++;
+	return s;
+}
+
+rad_status rad_hier_init(rad_hier *h, const rad_scene *s, rad_mem *mem,
+                         double min_edge, rad_error *err)
+{
+	memset(h, 0, sizeof(*h));
+	h->scene = s;
+	h->mem = mem;
+	h->min_edge = min_edge;
+	uint32_t n = s->npolys;
+	/* The roots must be one run: size the first block to hold them. */
+	rad_pool_init(&h->elems, mem, RAD_MEM_ELEM_SURFACE, sizeof(rad_elem),
+	              shift_for(n));
+	rad_pool_init(&h->clusters, mem, RAD_MEM_ELEM_CLUSTER,
+	              sizeof(rad_cluster), shift_for(n / 2 + 1));
+	rad_pool_init(&h->links, mem, RAD_MEM_LINKS, sizeof(rad_link), 12);
+	if (n == 0)
+		return rad_fail(err, RAD_ERR_INVALID, "scene has no polygons");
+	h->order =
+	        rad_mem_alloc(mem, RAD_MEM_ELEM_CLUSTER, n * sizeof(uint32_t));
+	if (!h->order || rad_pool_add(&h->elems, n) != 0 ||
+	    rad_pool_add(&h->clusters, 1) != 0) {
+		rad_hier_destroy(h);
+		return rad_fail(err, RAD_ERR_NOMEM, "hierarchy: out of memory");
+	}
+	for (uint32_t i = 0; i < n; i++) {
+		const rad_poly *p = &s->polys[i];
+		rad_elem *e = rad_elem_at(h, i);
+		memcpy(e->p0, p->p0, sizeof(e->p0));
+		memcpy(e->e1, p->e1, sizeof(e->e1));
+		memcpy(e->e2, p->e2, sizeof(e->e2));
+		e->area = p->area;
+		e->poly = i;
+		e->parent = e->child = e->links = RAD_NONE;
+		e->quad = p->quad;
+		h->order[i] = i;
+	}
+	h->nleaves = n;
+	rad_cluster *root = rad_cluster_at(h, 0);
+	root->parent = RAD_NONE;
+	root->first = 0;
+	root->count = n;
+	rad_status st = build_cluster(h, 0, err);
+	if (st) {
+		rad_hier_destroy(h);
+		return st;
+	}
+	rad_hier_reset_emission(h);
+	return RAD_OK;
+}
+
+void rad_hier_destroy(rad_hier *h)
+{
+	rad_pool_destroy(&h->elems);
+	rad_pool_destroy(&h->clusters);
+	rad_pool_destroy(&h->links);
+	rad_mem_free(h->mem, RAD_MEM_ELEM_CLUSTER, h->order);
+	h->order = NULL;
+}
+
+double rad_elem_edge(const rad_elem *e)
+{
+	v3 a = v3_f(e->e1), b = v3_f(e->e2);
+	/* The third edge: e2 - e1 (triangle) or the diagonal's sides. */
+	double l = fmax(v3_len(a), v3_len(b));
+	if (!e->quad)
+		l = fmax(l, v3_len(v3_sub(b, a)));
+	return l;
+}
+
+int rad_elem_can_split(const rad_hier *h, const rad_elem *e)
+{
+	return e->level < 200 && rad_elem_edge(e) > h->min_edge;
+}
+
+uint32_t rad_elem_split(rad_hier *h, uint32_t id)
+{
+	rad_elem *e = rad_elem_at(h, id);
+	if (e->child != RAD_NONE)
+		return e->child;
+	uint32_t c = rad_pool_add(&h->elems, 4);
+	if (c == RAD_NONE)
+		return RAD_NONE;
+	e = rad_elem_at(h, id);
+	v3 p0 = v3_f(e->p0), h1 = v3_scale(v3_f(e->e1), 0.5);
+	v3 h2 = v3_scale(v3_f(e->e2), 0.5);
+	/* Triangle: three corner copies and the inverted centre triangle;
+	 * parallelogram: the four quarter cells.  Same orientation as e. */
+	v3 org[4], d1[4], d2[4];
+	for (int k = 0; k < 4; k++) {
+		d1[k] = h1;
+		d2[k] = h2;
+	}
+	org[0] = p0;
+	org[1] = v3_add(p0, h1);
+	org[2] = v3_add(p0, h2);
+	org[3] = v3_add(org[1], h2);
+	if (!e->quad) {
+		d1[3] = v3_scale(h1, -1);
+		d2[3] = v3_scale(h2, -1);
+	}
+	for (int k = 0; k < 4; k++) {
+		rad_elem *ch = rad_elem_at(h, c + (uint32_t)k);
+		v3_store_f(ch->p0, org[k]);
+		v3_store_f(ch->e1, d1[k]);
+		v3_store_f(ch->e2, d2[k]);
+		ch->area = e->area * 0.25f;
+		ch->poly = e->poly;
+		ch->parent = id;
+		ch->child = ch->links = RAD_NONE;
+		memcpy(ch->B, e->B, sizeof(ch->B));
+		memcpy(ch->dB, e->dB, sizeof(ch->dB));
+		ch->level = (uint8_t)(e->level + 1);
+		ch->quad = e->quad;
+	}
+	e->child = c;
+	h->nleaves += 3;
+	h->splits++;
+	return c;
+}
+
+static rad_status mesh_down(rad_hier *h, uint32_t id, double edge,
+                            rad_error *err)
+{
+	rad_elem *e = rad_elem_at(h, id);
+	if (rad_elem_edge(e) <= edge || !rad_elem_can_split(h, e))
+		return RAD_OK;
+	uint32_t c = rad_elem_split(h, id);
+	if (c == RAD_NONE)
+		return rad_fail(err, RAD_ERR_NOMEM,
+		                "uniform mesh: out of memory");
+	for (uint32_t k = 0; k < 4; k++) {
+		rad_status st = mesh_down(h, c + k, edge, err);
+		if (st)
+			return st;
+	}
+	return RAD_OK;
+}
+
+rad_status rad_hier_mesh_uniform(rad_hier *h, double edge, rad_error *err)
+{
+	if (!(edge > 0))
+		return rad_fail(err, RAD_ERR_INVALID,
+		                "mesh edge must be > 0 (got %g)", edge);
+	for (uint32_t i = 0; i < h->scene->npolys; i++) {
+		rad_status st = mesh_down(h, i, edge, err);
+		if (st)
+			return st;
+	}
+	return RAD_OK;
+}
+
+/* Set B = E on the leaves below element id; I and dB cleared. */
+static void reset_tree(rad_hier *h, uint32_t id)
+{
+	rad_elem *e = rad_elem_at(h, id);
+	const rad_material *m = rad_elem_mat(h, e);
+	for (int c = 0; c < 3; c++) {
+		e->B[c] = m->emit[c];
+		e->I[c] = e->dB[c] = 0;
+	}
+	if (e->child != RAD_NONE)
+		for (uint32_t k = 0; k < 4; k++)
+			reset_tree(h, e->child + k);
+}
+
+static void reset_clusters(rad_hier *h, uint32_t id)
+{
+	rad_cluster *cl = rad_cluster_at(h, id);
+	memset(cl->I, 0, sizeof(cl->I));
+	memset(cl->dB, 0, sizeof(cl->dB));
+	if (cl->child != RAD_NONE) {
+		reset_clusters(h, cl->child);
+		reset_clusters(h, cl->child + 1);
+	}
+}
+
+void rad_hier_reset_emission(rad_hier *h)
+{
+	for (uint32_t i = 0; i < h->scene->npolys; i++)
+		reset_tree(h, i);
+	reset_clusters(h, 0);
+	rad_hier_pull(h);
+}
+
+/* Post-order: B of an inner element is the area average of its children. */
+static void pull_elem(rad_hier *h, uint32_t id)
+{
+	rad_elem *e = rad_elem_at(h, id);
+	if (e->child == RAD_NONE)
+		return;
+	double acc[3] = {0, 0, 0}, area = 0;
+	for (uint32_t k = 0; k < 4; k++) {
+		pull_elem(h, e->child + k);
+		const rad_elem *ch = rad_elem_at(h, e->child + k);
+		for (int c = 0; c < 3; c++)
+			acc[c] += (double)ch->area * ch->B[c];
+		area += ch->area;
+	}
+	for (int c = 0; c < 3; c++)
+		e->B[c] = (float)(acc[c] / area);
+}
+
+static void pull_cluster(rad_hier *h, uint32_t id)
+{
+	rad_cluster *cl = rad_cluster_at(h, id);
+	double acc[3] = {0, 0, 0};
+	if (cl->child != RAD_NONE) {
+		for (uint32_t k = 0; k < 2; k++) {
+			pull_cluster(h, cl->child + k);
+			const rad_cluster *ch =
+			        rad_cluster_at(h, cl->child + k);
+			for (int c = 0; c < 3; c++)
+				acc[c] += (double)ch->area * ch->B[c];
+		}
+	} else {
+		for (uint32_t j = cl->first; j < cl->first + cl->count; j++) {
+			const rad_elem *e = rad_elem_at(h, h->order[j]);
+			for (int c = 0; c < 3; c++)
+				acc[c] += (double)e->area * e->B[c];
+		}
+	}
+	for (int c = 0; c < 3; c++)
+		cl->B[c] = cl->area > 0 ? (float)(acc[c] / cl->area) : 0;
+}
+
+void rad_hier_pull(rad_hier *h)
+{
+	/* The trees, not the pools, say which records are live: a pool may
+	 * hold records skipped to keep sibling runs in one block. */
+	for (uint32_t i = 0; i < h->scene->npolys; i++)
+		pull_elem(h, i);
+	pull_cluster(h, 0);
+}
+
+uint32_t rad_link_new(rad_hier *h, uint32_t rcv, uint32_t src, float ff,
+                      float spread)
+{
+	uint32_t id = rad_pool_add(&h->links, 1);
+	if (id == RAD_NONE)
+		return RAD_NONE;
+	rad_link *l = rad_link_at(h, id);
+	l->rcv = rcv;
+	l->src = src;
+	l->ff = ff;
+	l->spread = spread;
+	l->next = l->child = RAD_NONE;
+	return id;
+}
+
+uint32_t *rad_node_links(rad_hier *h, uint32_t tagged)
+{
+	if (tagged & RAD_TAG_CLUSTER)
+		return &rad_cluster_at(h, tagged)->links;
+	return &rad_elem_at(h, tagged)->links;
+}

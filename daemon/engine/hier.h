@@ -19,6 +19,10 @@
  *     (consecutive records) for the link hierarchy of the reduced-memory
  *     solver; classic HR frees refined links instead.
  *
+ * Liveness: walk the trees (polygon roots 0 .. npolys-1, root cluster 0),
+ * never a pool's id range: pools may hold records skipped so that sibling
+ * runs stay inside one block, and records released to the free list.
+ *
  * Node ids in links are tagged: a plain id is a surface element, id with
  * RAD_TAG_CLUSTER a cluster, id with RAD_TAG_LIGHT a scene light (lights are
  * sources only and are never split).
@@ -49,21 +53,21 @@ typedef struct rad_elem {
 	float area;                /* m2 */
 	uint32_t poly;             /* root polygon (material, normal, node) */
 	uint32_t parent;           /* RAD_NONE for a root */
-	uint32_t child;            /* first of 4 children, RAD_NONE for a leaf */
-	uint32_t links;            /* head of the links received, or RAD_NONE */
-	float B[3], I[3], dB[3];   /* see DESIGN */
-	uint8_t level;             /* depth below the polygon root */
-	uint8_t quad;              /* copied from the polygon */
-	uint16_t flags;            /* solver-private */
+	uint32_t child;          /* first of 4 children, RAD_NONE for a leaf */
+	uint32_t links;          /* head of the links received, or RAD_NONE */
+	float B[3], I[3], dB[3]; /* see DESIGN */
+	uint8_t level;           /* depth below the polygon root */
+	uint8_t quad;            /* copied from the polygon */
+	uint16_t flags;          /* solver-private */
 } rad_elem;
 
 typedef struct rad_cluster {
-	float lo[3], hi[3];   /* bounding box of the contents */
-	float area;           /* total area of the polygons inside */
-	uint32_t parent;      /* RAD_NONE for the root */
-	uint32_t child;       /* first of 2 child clusters, RAD_NONE = leaf */
-	uint32_t first, count;/* range of order[] covered */
-	uint32_t links;       /* head of the links received */
+	float lo[3], hi[3];    /* bounding box of the contents */
+	float area;            /* total area of the polygons inside */
+	uint32_t parent;       /* RAD_NONE for the root */
+	uint32_t child;        /* first of 2 child clusters, RAD_NONE = leaf */
+	uint32_t first, count; /* range of order[] covered */
+	uint32_t links;        /* head of the links received */
 	float B[3], I[3], dB[3];
 } rad_cluster;
 
@@ -76,7 +80,8 @@ typedef struct rad_link {
 	uint32_t rcv;    /* tagged receiver id */
 	uint32_t src;    /* tagged source id */
 	float ff;        /* F(rcv <- src), visibility included; for a light,
-			    irradiance (lux) per unit of its intensity */
+	                    irradiance (lux) per unit of its intensity */
+	float spread;    /* max - min of ff over the receiver's points */
 	uint32_t next;   /* next link on the same receiver */
 	uint32_t child;  /* first child link (passive links), else RAD_NONE */
 	uint16_t nchild; /* number of consecutive children */
@@ -85,14 +90,14 @@ typedef struct rad_link {
 
 typedef struct rad_hier {
 	const rad_scene *scene;
-	rad_mem *mem;          /* the owning solver's counters */
-	rad_pool elems;        /* rad_elem, ELEM_SURFACE */
-	rad_pool clusters;     /* rad_cluster, ELEM_CLUSTER */
-	rad_pool links;        /* rad_link, LINKS */
-	uint32_t *order;       /* polygon ids in cluster order, ELEM_CLUSTER */
-	uint32_t nleaves;      /* surface leaves */
-	double min_edge;       /* elements with a longer edge may split */
-	uint64_t splits;       /* element splits since last reset */
+	rad_mem *mem;      /* the owning solver's counters */
+	rad_pool elems;    /* rad_elem, ELEM_SURFACE */
+	rad_pool clusters; /* rad_cluster, ELEM_CLUSTER */
+	rad_pool links;    /* rad_link, LINKS */
+	uint32_t *order;   /* polygon ids in cluster order, ELEM_CLUSTER */
+	uint32_t nleaves;  /* surface leaves */
+	double min_edge;   /* elements with a longer edge may split */
+	uint64_t splits;   /* element splits since last reset */
 } rad_hier;
 
 static inline rad_elem *rad_elem_at(const rad_hier *h, uint32_t id)
@@ -113,7 +118,7 @@ static inline rad_link *rad_link_at(const rad_hier *h, uint32_t id)
  * On failure everything allocated is released.
  */
 rad_status rad_hier_init(rad_hier *h, const rad_scene *s, rad_mem *mem,
-			 double min_edge, rad_error *err);
+                         double min_edge, rad_error *err);
 void rad_hier_destroy(rad_hier *h);
 
 /* Longest edge of an element's region, metres. */
@@ -141,7 +146,7 @@ void rad_hier_pull(rad_hier *h);
 
 /* Material of the polygon an element belongs to. */
 static inline const rad_material *rad_elem_mat(const rad_hier *h,
-					       const rad_elem *e)
+                                               const rad_elem *e)
 {
 	return &h->scene->mats[h->scene->polys[e->poly].mat];
 }
@@ -153,7 +158,8 @@ static inline double rad_luma(const float c[3])
 }
 
 /* Link store: allocate one link (zeroed, child = RAD_NONE), or RAD_NONE. */
-uint32_t rad_link_new(rad_hier *h, uint32_t rcv, uint32_t src, float ff);
+uint32_t rad_link_new(rad_hier *h, uint32_t rcv, uint32_t src, float ff,
+                      float spread);
 /* Head pointer of a node's received-links list (element or cluster). */
 uint32_t *rad_node_links(rad_hier *h, uint32_t tagged);
 

@@ -9,7 +9,7 @@
 
 static const char *const kind_names[RAD_MEM_NKINDS] = {
 #define RAD_MEM_NAME_(name, str) str,
-	RAD_MEM_KINDS(RAD_MEM_NAME_)
+        RAD_MEM_KINDS(RAD_MEM_NAME_)
 #undef RAD_MEM_NAME_
 };
 
@@ -24,7 +24,6 @@ void rad_mem_init(rad_mem *m)
 		atomic_init(&m->bytes[k], 0);
 	atomic_init(&m->total, 0);
 	atomic_init(&m->peak, 0);
-	m->fail_after = -1;
 }
 
 void rad_mem_report_clear(rad_mem_report *r)
@@ -53,15 +52,22 @@ void rad_mem_count(rad_mem *m, rad_mem_kind kind, int64_t delta)
 		;
 }
 
-/* Fault injection for tests: fail the Nth allocation, then every one. */
+static _Atomic int64_t fail_countdown = -1; /* < 0: injection off */
+
+void rad_mem_inject_failure(int64_t n)
+{
+	atomic_store(&fail_countdown, n);
+}
+
+/* 1 if this allocation must fail (see rad_mem_inject_failure). */
 static int inject_failure(rad_mem *m)
 {
-	if (m->fail_after < 0)
-		return 0;
-	if (m->fail_after == 0)
-		return 1;
-	m->fail_after--;
-	return 0;
+	(void)m;
+	int64_t n = atomic_load(&fail_countdown);
+	while (n > 0 &&
+	       !atomic_compare_exchange_weak(&fail_countdown, &n, n - 1))
+		;
+	return n == 0;
 }
 
 void *rad_mem_alloc(rad_mem *m, rad_mem_kind kind, size_t size)
@@ -120,7 +126,7 @@ char *rad_mem_strdup(rad_mem *m, rad_mem_kind kind, const char *s)
 /* ------------------------------------------------------------ stable pool */
 
 void rad_pool_init(rad_pool *p, rad_mem *mem, rad_mem_kind kind,
-		   uint32_t rec_size, uint32_t base_shift)
+                   uint32_t rec_size, uint32_t base_shift)
 {
 	memset(p, 0, sizeof(*p));
 	p->mem = mem;
@@ -177,8 +183,9 @@ uint32_t rad_pool_add(rad_pool *p, uint32_t n)
 		}
 		while (p->nblocks <= k) {
 			size_t bytes = (size_t)p->rec_size
-				       << (p->base_shift + p->nblocks);
-			unsigned char *b = rad_mem_alloc(p->mem, p->kind, bytes);
+			               << (p->base_shift + p->nblocks);
+			unsigned char *b =
+			        rad_mem_alloc(p->mem, p->kind, bytes);
 			if (!b)
 				return RAD_NONE;
 			p->block[p->nblocks++] = b;

@@ -32,8 +32,14 @@ typedef struct rad_mem {
 	_Atomic int64_t bytes[RAD_MEM_NKINDS]; /* current bytes held by kind */
 	_Atomic int64_t total;                 /* sum of bytes[] */
 	_Atomic int64_t peak;                  /* high-water mark of total */
-	int64_t fail_after; /* tests: fail the Nth allocation from now; <0 off */
 } rad_mem;
+
+/*
+ * Fault injection for tests: the nth counted allocation from now (0 = the
+ * next one) and every later one fail, process-wide, until called again
+ * with n < 0.  Production code never calls it.
+ */
+void rad_mem_inject_failure(int64_t n);
 
 void rad_mem_init(rad_mem *m);
 /* Add what m holds now into r (r is not cleared first). */
@@ -69,7 +75,7 @@ typedef struct rad_pool {
 } rad_pool;
 
 void rad_pool_init(rad_pool *p, rad_mem *mem, rad_mem_kind kind,
-		   uint32_t rec_size, uint32_t base_shift);
+                   uint32_t rec_size, uint32_t base_shift);
 void rad_pool_destroy(rad_pool *p);
 
 /*

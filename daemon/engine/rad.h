@@ -34,8 +34,8 @@ extern "C" {
 
 typedef enum rad_status {
 	RAD_OK = 0,
-	RAD_ERR_NOMEM,       /* an allocation failed; the object is unchanged */
-	RAD_ERR_INVALID,     /* bad input: malformed scene, bad option, NaN... */
+	RAD_ERR_NOMEM,   /* an allocation failed; the object is unchanged */
+	RAD_ERR_INVALID, /* bad input: malformed scene, bad option, NaN... */
 	RAD_ERR_UNSUPPORTED, /* valid input that the engine does not handle */
 	RAD_ERR_STATE,       /* call not allowed in the object's state */
 	RAD_ERR_EMBREE,      /* the ray tracing kernel reported an error */
@@ -61,22 +61,23 @@ const char *rad_status_name(rad_status st);
  * owning object is freed.
  */
 #define RAD_MEM_KINDS(X)                                                       \
-	X(GEOMETRY, "geometry")          /* input polygons, vertices */            \
-	X(MATERIALS, "materials")        /* the shared material table */           \
-	X(LIGHTS, "lights")              /* punctual and directional lights */     \
-	X(NAMES, "names")                /* node and mesh names */                 \
-	X(BVH, "bvh")                    /* Embree: BVH and its buffers */         \
-	X(ELEM_SURFACE, "elements_surface") /* quadtree elements of polygons */    \
-	X(ELEM_CLUSTER, "elements_cluster") /* volume clusters */                  \
-	X(LINKS, "links")                /* link pool (active and passive) */      \
-	X(MATRIX, "matrix")              /* the matrix solver's form factors */    \
-	X(SCRATCH, "scratch")            /* per-iteration work buffers */
+	X(GEOMETRY, "geometry")   /* input polygons, vertices */               \
+	X(MATERIALS, "materials") /* the shared material table */              \
+	X(LIGHTS, "lights")       /* punctual and directional lights */        \
+	X(NAMES, "names")         /* node and mesh names */                    \
+	X(BVH, "bvh")             /* Embree: BVH and its buffers */            \
+	X(ELEM_SURFACE,                                                        \
+	  "elements_surface") /* quadtree elements of polygons */              \
+	X(ELEM_CLUSTER, "elements_cluster") /* volume clusters */              \
+	X(LINKS, "links")     /* link pool (active and passive) */             \
+	X(MATRIX, "matrix")   /* the matrix solver's form factors */           \
+	X(SCRATCH, "scratch") /* per-iteration work buffers */
 
 typedef enum rad_mem_kind {
 #define RAD_MEM_ENUM_(name, str) RAD_MEM_##name,
 	RAD_MEM_KINDS(RAD_MEM_ENUM_)
 #undef RAD_MEM_ENUM_
-	RAD_MEM_NKINDS
+	        RAD_MEM_NKINDS
 } rad_mem_kind;
 
 typedef struct rad_mem_report {
@@ -110,15 +111,15 @@ typedef struct rad_light_desc {
 } rad_light_desc;
 
 typedef struct rad_scene_counts {
-	uint32_t triangles_in;        /* triangles offered to the builder */
-	uint32_t triangles_nonfinite; /* skipped: NaN or Inf coordinate */
-	uint32_t triangles_degenerate;/* skipped: zero or sliver area */
-	uint32_t polygons;            /* polygons kept (after quad merging) */
-	uint32_t quads;               /* of which parallelograms */
-	uint32_t materials;           /* distinct materials stored */
-	uint32_t materials_offered;   /* materials offered (before sharing) */
+	uint32_t triangles_in;         /* triangles offered to the builder */
+	uint32_t triangles_nonfinite;  /* skipped: NaN or Inf coordinate */
+	uint32_t triangles_degenerate; /* skipped: zero or sliver area */
+	uint32_t polygons;             /* polygons kept (after quad merging) */
+	uint32_t quads;                /* of which parallelograms */
+	uint32_t materials;            /* distinct materials stored */
+	uint32_t materials_offered;    /* materials offered (before sharing) */
 	uint32_t lights;
-	uint32_t emitters;            /* polygons with non-zero exitance */
+	uint32_t emitters; /* polygons with non-zero exitance */
 	uint32_t nodes;
 } rad_scene_counts;
 
@@ -131,12 +132,12 @@ rad_status rad_scene_new(rad_scene **out, rad_error *err);
  * channel; luminance in cd/m2 (a Lambertian emitter's exitance is pi*L).
  */
 rad_status rad_scene_add_material(rad_scene *s, const double reflectance[3],
-				  const double luminance[3], uint32_t *id,
-				  rad_error *err);
+                                  const double luminance[3], uint32_t *id,
+                                  rad_error *err);
 
 /* Add a named node (glTF node or mesh instance); returns its id. */
 rad_status rad_scene_add_node(rad_scene *s, const char *name, uint32_t *id,
-			      rad_error *err);
+                              rad_error *err);
 
 /*
  * Add ntri triangles given as 9 doubles each (three world-space vertices,
@@ -145,11 +146,11 @@ rad_status rad_scene_add_node(rad_scene *s, const char *name, uint32_t *id,
  * and counted, not refused.
  */
 rad_status rad_scene_add_triangles(rad_scene *s, uint32_t material,
-				   uint32_t node, const double *xyz,
-				   size_t ntri, rad_error *err);
+                                   uint32_t node, const double *xyz,
+                                   size_t ntri, rad_error *err);
 
 rad_status rad_scene_add_light(rad_scene *s, const rad_light_desc *light,
-			       rad_error *err);
+                               rad_error *err);
 
 /*
  * Finish the scene: merge coplanar triangle pairs into parallelograms,
@@ -166,9 +167,9 @@ void rad_scene_free(rad_scene *s);
 /* ----------------------------------------------------------------- solver */
 
 typedef enum rad_solver_kind {
-	RAD_SOLVER_MATRIX = 0, /* full form-factor matrix, Gauss-Seidel */
-	RAD_SOLVER_PROGRESSIVE,/* shooting with adaptive subdivision */
-	RAD_SOLVER_HR,         /* hierarchical radiosity (+ clustering) */
+	RAD_SOLVER_MATRIX = 0,  /* full form-factor matrix, Gauss-Seidel */
+	RAD_SOLVER_PROGRESSIVE, /* shooting with adaptive subdivision */
+	RAD_SOLVER_HR,          /* hierarchical radiosity (+ clustering) */
 	RAD_SOLVER_NKINDS
 } rad_solver_kind;
 
@@ -187,17 +188,25 @@ typedef struct rad_options {
 	 * factor.  Smaller is finer, slower, bigger.
 	 */
 	double eps;
+	/*
+	 * Receiver accuracy: a link is pushed to smaller receivers while the
+	 * irradiance it brings varies over its receiver by more than this
+	 * fraction of the scene's mean radiosity.  Smaller is more accurate
+	 * near corners and shadow edges, and finer.  hr only.
+	 */
+	double variation;
 	/* Smallest element, as a fraction of the scene's bounding-box
 	 * diagonal (edge length).  Stops refinement at corners. */
 	double min_edge_rel;
 	/* Matrix solver (and progressive's starting mesh): element edge,
 	 * as a fraction of the bounding-box diagonal. */
 	double mesh_edge_rel;
-	int clustering;        /* hr: volume clusters on (default 1) */
-	int threads;           /* worker threads; 0 = number of cores */
-	int rcv_samples;       /* receiver points per form factor (1..16) */
-	int vis_samples;       /* shadow rays per receiver point (1..16) */
-	/* Called from the stepping thread within long iterations; may be NULL. */
+	int clustering;  /* hr: volume clusters on (default 1) */
+	int threads;     /* worker threads; 0 = number of cores */
+	int rcv_samples; /* receiver points per form factor (1..16) */
+	int vis_samples; /* shadow rays per receiver point (1..16) */
+	/* Called from the stepping thread within long iterations; may be NULL.
+	 */
 	void (*progress)(void *ud, double fraction);
 	void *progress_ud;
 	/* Raised by another thread to stop a step early (RAD_ERR_CANCELLED). */
@@ -224,26 +233,32 @@ typedef struct rad_stats {
 	uint64_t links_deleted; /* this iteration */
 	uint64_t elements;      /* surface elements */
 	uint64_t clusters;
-	uint64_t leaves;        /* surface leaves (the mesh) */
-	uint64_t refinements;   /* element splits this iteration */
-	uint64_t rays;          /* shadow rays this iteration */
-	double residual;        /* relative change / unshot energy */
-	double error_estimate;  /* estimated remaining relative error */
-	int converged;          /* error_estimate below the tolerance */
-	rad_mem_report mem;     /* solver + scene memory */
+	uint64_t leaves;       /* surface leaves (the mesh) */
+	uint64_t refinements;  /* element splits this iteration */
+	uint64_t rays;         /* shadow rays this iteration */
+	double residual;       /* relative change / unshot energy */
+	double error_estimate; /* estimated remaining relative error */
+	int converged;         /* error_estimate below the tolerance */
+	rad_mem_report mem;    /* solver + scene memory */
 } rad_stats;
 
 typedef struct rad_solver rad_solver;
 
 rad_status rad_solver_new(const rad_scene *scene, const rad_options *opt,
-			  rad_solver **out, rad_error *err);
+                          rad_solver **out, rad_error *err);
 
-/* One iteration (refine, gather, push-pull; or one sweep / batch of shots). */
+/*
+ * One iteration (refine, gather, push-pull; or one sweep / batch of shots).
+ * RAD_ERR_CANCELLED: the cancel flag was raised; the solution published is
+ * consistent (refinement stopped at the level reached) and stepping may go
+ * on once the flag is lowered.  Any other error (NOMEM, EMBREE) leaves a
+ * solver that may be queried and freed, but not stepped again.
+ */
 rad_status rad_solver_step(rad_solver *sv, rad_error *err);
 
 /* Step until error_estimate <= tol or max_iter iterations were done. */
 rad_status rad_solver_converge(rad_solver *sv, double tol, uint32_t max_iter,
-			       rad_error *err);
+                               rad_error *err);
 
 /* Change the refinement threshold between iterations. */
 rad_status rad_solver_set_eps(rad_solver *sv, double eps, rad_error *err);
@@ -256,12 +271,12 @@ void rad_solver_stats(const rad_solver *sv, rad_stats *out);
  * zero.  A point on a surface sees the side its normal points to.
  */
 rad_status rad_solver_illuminance(const rad_solver *sv, const double *pts,
-				  size_t n, double *lux, rad_error *err);
+                                  size_t n, double *lux, rad_error *err);
 
 /* Per-leaf results, for export: calls fn once per leaf element. */
 typedef void (*rad_leaf_fn)(void *ud, uint32_t node, const double p[4][3],
-			    int nv, const double radiosity[3],
-			    const double irradiance[3]);
+                            int nv, const double radiosity[3],
+                            const double irradiance[3]);
 void rad_solver_leaves(const rad_solver *sv, rad_leaf_fn fn, void *ud);
 
 void rad_solver_free(rad_solver *sv);

@@ -41,34 +41,37 @@ typedef struct rad_light {
 	double intensity[3]; /* candela (point, spot), lux (directional) */
 	double range;        /* 0 = infinite */
 	double cos_inner, cos_outer; /* spot cone, cosines */
-	char *name;          /* may be NULL */
+	char *name;                  /* may be NULL */
 } rad_light;
 
 typedef struct rad_vis rad_vis; /* vis.h */
 
 struct rad_scene {
-	rad_mem mem;           /* everything the scene holds */
+	rad_mem mem; /* everything the scene holds */
 	int committed;
 
-	rad_poly *polys;       /* GEOMETRY */
+	rad_poly *polys; /* GEOMETRY */
 	uint32_t npolys, cap_polys;
+	float *stage; /* GEOMETRY, until commit: the float-rounded
+	                 input vertices, 9 per polygon, so that quad
+	                 merging finds shared edges by exact match */
 
-	rad_material *mats;    /* MATERIALS; shared, stored once each */
+	rad_material *mats; /* MATERIALS; shared, stored once each */
 	uint32_t nmats, cap_mats;
 
-	rad_light *lights;     /* LIGHTS */
+	rad_light *lights; /* LIGHTS */
 	uint32_t nlights, cap_lights;
 
-	char **nodes;          /* NAMES: node/mesh instance names */
+	char **nodes; /* NAMES: node/mesh instance names */
 	uint32_t nnodes, cap_nodes;
 
-	double lo[3], hi[3];   /* bounds of polygons and positional lights */
-	double diag;           /* bounding-box diagonal, metres (> 0) */
-	double total_area;     /* m2 */
-	double total_flux[3];  /* lm emitted by surfaces and lights, estimate */
+	double lo[3], hi[3];  /* bounds of polygons and positional lights */
+	double diag;          /* bounding-box diagonal, metres (> 0) */
+	double total_area;    /* m2 */
+	double total_flux[3]; /* lm emitted by surfaces and lights, estimate */
 
 	rad_scene_counts counts;
-	rad_vis *vis;          /* BVH over the polygons, after commit */
+	rad_vis *vis; /* BVH over the polygons, after commit */
 };
 
 /* Position of parametric point (s,t) on a polygon. */

@@ -24,14 +24,14 @@ typedef struct rad_solver_ops {
 struct rad_solver {
 	const rad_scene *scene;
 	rad_options opt;
-	rad_mem mem;        /* everything this solver holds */
-	rad_hier h;         /* elements, clusters, links */
-	rad_par *par;       /* worker threads */
+	rad_mem mem;  /* everything this solver holds */
+	rad_hier h;   /* elements, clusters, links */
+	rad_par *par; /* worker threads */
 	const rad_solver_ops *ops;
-	void *impl;         /* solver-private state, counted in mem */
-	rad_stats stats;    /* published after each step */
-	double flux_scale;  /* photopic flux of all sources (lm), > 0 */
-	double tol;         /* convergence tolerance for error_estimate */
+	void *impl;        /* solver-private state, counted in mem */
+	rad_stats stats;   /* published after each step */
+	double flux_scale; /* photopic flux of all sources (lm), > 0 */
+	double tol;        /* convergence tolerance for error_estimate */
 };
 
 extern const rad_solver_ops rad_solver_matrix_ops;

@@ -53,7 +53,7 @@ static inline double v3_dot(v3 a, v3 b)
 static inline v3 v3_cross(v3 a, v3 b)
 {
 	return v3_make(a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z,
-		       a.x * b.y - a.y * b.x);
+	               a.x * b.y - a.y * b.x);
 }
 static inline double v3_len(v3 a)
 {

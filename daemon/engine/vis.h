@@ -7,8 +7,9 @@
  * the scene's counters through the device memory monitor.
  *
  * Ray ends are trimmed by eps = RAD_VIS_EPS_REL x the scene's
- * bounding-box diagonal, so results do not change when the whole scene is
- * scaled: an endpoint that lies on a surface is moved off it by eps along
+ * bounding-box diagonal (more for a scene far from the origin, where float
+ * coordinates are coarser), so results do not change when the whole scene
+ * is scaled: an endpoint that lies on a surface is moved off it by eps along
  * the surface normal (towards the side the other endpoint is on) and the
  * segment is shortened by eps at both ends.
  *
@@ -40,8 +41,7 @@ double rad_vis_eps(const rad_vis *v);
  * at a / b, or NULL where the endpoint is not on a surface (light, cluster
  * centre).  The trimming above is applied here.
  */
-int rad_vis_segment(const rad_vis *v, v3 a, const v3 *na, v3 b,
-		    const v3 *nb);
+int rad_vis_segment(const rad_vis *v, v3 a, const v3 *na, v3 b, const v3 *nb);
 
 /* 1 if the ray from a (normal na or NULL) in unit direction d escapes to
  * infinity (directional lights). */
@@ -52,6 +52,6 @@ int rad_vis_ray_free(const rad_vis *v, v3 a, const v3 *na, v3 d);
  * UINT32_MAX for a miss; *t receives the distance.
  */
 uint32_t rad_vis_first_hit(const rad_vis *v, v3 org, v3 dir, double tfar,
-			   double *t);
+                           double *t);
 
 #endif

@@ -1,2 +1,246 @@
-#!/bin/sh
-exit 1
+#!/usr/bin/env bash
+# test_cli.sh -- drive luxrad-solve as a user would and check its exit
+# codes and output.
+#
+# Usage: test_cli.sh PATH/TO/luxrad-solve REPO_ROOT   (run by CTest)
+#
+# Checks: --help documents every option; usage errors (unknown option, bad
+# values, conflicting options, malformed points file naming file:line) exit
+# 2; a missing scene exits 1 with a message; a Cornell box solve with
+# --json prints nothing but one valid JSON object with the documented keys
+# and one finite, non-negative lux value per point; the illuminance does
+# not depend on the number of threads, nor on the file format (.gltf or
+# .glb of the same scene).  JSON is checked with Debian's
+# python3 (/usr/bin/python3: the python3 first on PATH may be another
+# installation).
+set -u
+
+SOLVE=${1:?usage: test_cli.sh LUXRAD_SOLVE REPO_ROOT}
+ROOT=${2:?usage: test_cli.sh LUXRAD_SOLVE REPO_ROOT}
+SCENE="$ROOT/scenes/cornell.gltf"
+PY=/usr/bin/python3
+# A coarse threshold keeps each solve to a few seconds, even under ASan.
+EPS=0.05
+
+TMP=$(mktemp -d "${TMPDIR:-/tmp}/luxrad-cli.XXXXXX") || exit 1
+trap 'rm -rf "$TMP"' EXIT
+FAILS=0
+PASSES=0
+
+pass() {
+	PASSES=$((PASSES + 1))
+	echo "ok - $1"
+}
+
+fail() {
+	FAILS=$((FAILS + 1))
+	echo "not ok - $1"
+	if [[ -s $TMP/err ]]; then
+		sed 's/^/#   stderr: /' "$TMP/err" | head -n 20
+	fi
+}
+
+# run CMD...: run luxrad-solve, stdout to $TMP/out, stderr to $TMP/err;
+# sets RC.
+run() {
+	"$SOLVE" "$@" >"$TMP/out" 2>"$TMP/err" </dev/null
+	RC=$?
+}
+
+# expect_exit NAME CODE [STDERR-SUBSTRING]: check the last run.
+expect_exit() {
+	local name=$1 code=$2 needle=${3:-}
+	if [[ $RC -ne $code ]]; then
+		fail "$name: exit $RC, expected $code"
+	elif [[ -n $needle ]] && ! grep -qF -- "$needle" "$TMP/err"; then
+		fail "$name: stderr does not mention '$needle'"
+	else
+		pass "$name"
+	fi
+}
+
+test_help() {
+	local opt missing=""
+	run --help
+	expect_exit "--help exits 0" 0
+	for opt in solver eps iterations converge max-iterations threads \
+		points json per-iteration oracle no-clustering min-edge \
+		mesh-edge rcv-samples vis-samples help; do
+		grep -qF -- "--$opt" "$TMP/out" || missing="$missing --$opt"
+	done
+	for word in metres lux cd/m2 "Exit status"; do
+		grep -qF -- "$word" "$TMP/out" || missing="$missing '$word'"
+	done
+	if [[ -z $missing ]]; then
+		pass "--help documents every option, unit and exit code"
+	else
+		fail "--help does not mention:$missing"
+	fi
+}
+
+test_usage_errors() {
+	run "$SCENE" --frobnicate
+	expect_exit "unknown option exits 2" 2 "--frobnicate"
+	run
+	expect_exit "no scene exits 2" 2 "no scene"
+	run "$SCENE" --eps -1
+	expect_exit "negative eps exits 2" 2 "--eps"
+	run "$SCENE" --eps nan
+	expect_exit "NaN eps exits 2" 2 "--eps"
+	run "$SCENE" --threads -1
+	expect_exit "negative threads exits 2" 2 "--threads"
+	run "$SCENE" --iterations 1.5
+	expect_exit "fractional iterations exits 2" 2 "--iterations"
+	run "$SCENE" --solver simplex
+	expect_exit "unknown solver exits 2" 2 "simplex"
+	run "$SCENE" --iterations 2 --converge 1e-3
+	expect_exit "--iterations with --converge exits 2" 2 "--converge"
+	run "$SCENE" --eps
+	expect_exit "missing option value exits 2" 2 "--eps"
+}
+
+test_file_errors() {
+	run "$TMP/no-such-scene.gltf" --iterations 1
+	expect_exit "missing scene exits 1" 1 "no-such-scene.gltf"
+	printf 'not a glTF document\n' >"$TMP/garbage.gltf"
+	run "$TMP/garbage.gltf" --iterations 1
+	expect_exit "malformed scene exits 1" 1 "garbage.gltf"
+	printf '# header\n0 0 0 0 1 0\n\n0 0 zero 0 1 0\n' >"$TMP/bad.pts"
+	run "$SCENE" --points "$TMP/bad.pts" --iterations 1
+	expect_exit "bad points line exits 2 naming file:line" 2 "bad.pts:4"
+	printf '0 0 0 0 0 0\n' >"$TMP/zero.pts"
+	run "$SCENE" --points "$TMP/zero.pts" --iterations 1
+	expect_exit "zero normal exits 2" 2 "zero.pts:1"
+	run "$SCENE" --points "$TMP/no-such.pts" --iterations 1
+	expect_exit "missing points file exits 1" 1 "no-such.pts"
+}
+
+# Three points inside the box, placed from the scene bounds that a first
+# solve reports: on the floor facing up, mid-height facing up, and just
+# below the top facing down (glTF is +Y up).
+make_points() {
+	run "$SCENE" --json --iterations 1 --eps "$EPS"
+	[[ $RC -eq 0 ]] || return 1
+	"$PY" - "$TMP/out" >"$TMP/good.pts" <<'EOF'
+import json, sys
+s = json.load(open(sys.argv[1]))["scene"]
+lo, hi = s["bounds_min"], s["bounds_max"]
+c = [(a + b) / 2 for a, b in zip(lo, hi)]
+h = hi[1] - lo[1]
+print("# x y z nx ny nz")
+print(c[0], lo[1] + 1e-3 * h, c[2], 0, 1, 0)
+print(c[0], c[1], c[2], 0, 1, 0)
+print(c[0], hi[1] - 0.05 * h, c[2], 0, -1, 0)
+EOF
+}
+
+# check_json FILE NPOINTS NITER: keys, lux values, per-iteration records.
+check_json() {
+	"$PY" - "$1" "$2" "$3" <<'EOF'
+import json, math, sys
+path, npts, niter = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
+d = json.load(open(path))
+keys = ["illuminance_lux", "iterations", "seconds", "links", "elements",
+        "memory_bytes", "solver", "eps", "converged", "error_estimate",
+        "clusters", "leaves", "rays", "scene", "per_iteration"]
+missing = [k for k in keys if k not in d]
+assert not missing, "missing keys %s" % missing
+lux = d["illuminance_lux"]
+assert len(lux) == npts, "%d lux values" % len(lux)
+for v in lux:
+    assert isinstance(v, (int, float)) and math.isfinite(v) and v >= 0, v
+assert d["iterations"] == niter, d["iterations"]
+assert d["solver"] == "hr", d["solver"]
+mem = d["memory_bytes"]
+parts = sum(v for k, v in mem.items() if k != "total")
+assert mem["total"] == parts > 0, mem
+it = d["per_iteration"]
+assert len(it) == niter, len(it)
+for k in ["iteration", "seconds", "links", "links_ss", "links_sc",
+          "links_cc", "links_light", "elements", "clusters", "leaves",
+          "refinements", "residual", "error_estimate", "memory_bytes"]:
+    assert k in it[-1], "per_iteration lacks " + k
+assert [r["iteration"] for r in it] == list(range(1, niter + 1))
+assert d["scene"]["polygons"] > 0
+print("lux", lux)
+EOF
+}
+
+test_solve_json() {
+	if ! make_points; then
+		fail "JSON solve of $SCENE (exit $RC)"
+		return
+	fi
+	# --per-iteration must write to stderr only: stdout stays pure JSON.
+	run "$SCENE" --json --iterations 2 --eps "$EPS" --threads 1 \
+		--points "$TMP/good.pts" --per-iteration
+	cp "$TMP/out" "$TMP/t1.json"
+	if [[ $RC -ne 0 ]]; then
+		fail "--json --iterations 2 exits $RC"
+	elif ! grep -q '^iteration 2:' "$TMP/err"; then
+		fail "--per-iteration printed no line for iteration 2 on stderr"
+	elif check_json "$TMP/t1.json" 3 2 >"$TMP/err" 2>&1; then
+		pass "--json output: keys, 3 finite lux >= 0, 2 iterations"
+	else
+		fail "--json output is not as documented"
+	fi
+	run "$SCENE" --json --iterations 2 --eps "$EPS" --threads 2 \
+		--points "$TMP/good.pts"
+	cp "$TMP/out" "$TMP/t2.json"
+	if [[ $RC -eq 0 ]] && "$PY" - "$TMP/t1.json" "$TMP/t2.json" \
+		>"$TMP/err" 2>&1 <<'EOF'; then
+import json, sys
+a, b = (json.load(open(p))["illuminance_lux"] for p in sys.argv[1:3])
+assert a == b, "threads 1: %r\nthreads 2: %r" % (a, b)
+EOF
+		pass "illuminance identical with --threads 1 and 2"
+	else
+		fail "illuminance differs between --threads 1 and 2"
+	fi
+}
+
+# The same Cornell box as .glb (written by luxrad-scenegen, built beside
+# luxrad-solve) must give exactly the illuminance of the .gltf.
+test_glb() {
+	local gen
+	gen="$(dirname "$SOLVE")/luxrad-scenegen"
+	if [[ ! -x $gen ]]; then
+		echo "ok - .glb input # SKIP no luxrad-scenegen beside luxrad-solve"
+		return
+	fi
+	if ! "$gen" cornell -o "$TMP/cornell.glb" 2>"$TMP/err"; then
+		fail "luxrad-scenegen cornell -o cornell.glb"
+		return
+	fi
+	run "$TMP/cornell.glb" --json --iterations 2 --eps "$EPS" \
+		--threads 1 --points "$TMP/good.pts"
+	if [[ $RC -eq 0 ]] && "$PY" - "$TMP/t1.json" "$TMP/out" \
+		>"$TMP/err" 2>&1 <<'EOF'; then
+import json, sys
+a, b = (json.load(open(p))["illuminance_lux"] for p in sys.argv[1:3])
+assert a == b, ".gltf: %r\n.glb: %r" % (a, b)
+EOF
+		pass ".glb input gives the same illuminance as .gltf"
+	else
+		fail ".glb input (exit $RC)"
+	fi
+}
+
+test_solve_text() {
+	run "$SCENE" --iterations 1 --eps "$EPS" --points "$TMP/good.pts"
+	if [[ $RC -eq 0 ]] && grep -q 'illuminance (lux)' "$TMP/out" &&
+		grep -q 'memory by structure' "$TMP/out"; then
+		pass "text report has memory and illuminance sections"
+	else
+		fail "text report (exit $RC)"
+	fi
+}
+
+test_help
+test_usage_errors
+test_file_errors
+test_solve_json
+test_glb
+test_solve_text
+echo "$PASSES passed, $FAILS failed"
+[[ $FAILS -eq 0 ]]

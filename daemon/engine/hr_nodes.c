@@ -1,0 +1,335 @@
+/*
+ * hr_nodes.c -- link endpoints for the hierarchical solvers (hr_nodes.h).
+ *
+ * Clusters are isotropic volumes (Sillion 1995): as an emitter a cluster of
+ * surface area A and mean radiosity B sends intensity B A / (4 pi) in every
+ * direction (the sphere average of a diffuse patch's B A cos / pi); as a
+ * receiver it collects normal irradiance, which the push hands to each
+ * polygon inside times 1/4, the sphere average of cos+.  Both factors keep
+ * reciprocity: (A_r/4) F(r <- s) = A_s F(s <- r).
+ *
+ * Sample points of a cluster are the centroids of up to n of its polygons,
+ * spread over its range of order[], with those polygons' normals, so that
+ * shadow rays start on real surfaces rather than inside objects.
+ */
+#include "hr_nodes.h"
+
+#include <math.h>
+
+#include "vis.h"
+
+static const rad_light *node_light(const rad_hier *h, uint32_t t)
+{
+	return &h->scene->lights[node_index(t)];
+}
+
+static void elem_patch(const rad_hier *h, uint32_t id, rad_patch *p)
+{
+	const rad_elem *e = rad_elem_at(h, id);
+	rad_patch_from_floats(p, e->p0, e->e1, e->e2, e->quad);
+}
+
+double node_luma_B(const rad_hier *h, uint32_t t)
+{
+	double b[3];
+	node_B(h, t, b);
+	return RAD_LUMA_R * b[0] + RAD_LUMA_G * b[1] + RAD_LUMA_B * b[2];
+}
+
+void node_B(const rad_hier *h, uint32_t t, double out[3])
+{
+	const float *b;
+	if (node_is_light(t)) {
+		for (int c = 0; c < 3; c++)
+			out[c] = node_light(h, t)->intensity[c];
+		return;
+	}
+	b = node_is_cluster(t) ? rad_cluster_at(h, t)->B : rad_elem_at(h, t)->B;
+	for (int c = 0; c < 3; c++)
+		out[c] = b[c];
+}
+
+double node_area_eff(const rad_hier *h, uint32_t t)
+{
+	if (node_is_cluster(t))
+		return 0.25 * rad_cluster_at(h, t)->area;
+	return rad_elem_at(h, t)->area;
+}
+
+int node_splittable(const rad_hier *h, uint32_t t)
+{
+	if (node_is_light(t))
+		return 0;
+	if (node_is_cluster(t))
+		return 1;
+	return rad_elem_can_split(h, rad_elem_at(h, t));
+}
+
+static v3 cluster_center(const rad_cluster *c)
+{
+	return v3_make(0.5 * ((double)c->lo[0] + c->hi[0]),
+	               0.5 * ((double)c->lo[1] + c->hi[1]),
+	               0.5 * ((double)c->lo[2] + c->hi[2]));
+}
+
+static double cluster_diag(const rad_cluster *c)
+{
+	return v3_len(v3_sub(v3_f(c->hi), v3_f(c->lo)));
+}
+
+double node_size(const rad_hier *h, uint32_t t)
+{
+	if (node_is_cluster(t))
+		return cluster_diag(rad_cluster_at(h, t));
+	if (node_is_light(t))
+		return 0;
+	return rad_elem_edge(rad_elem_at(h, t));
+}
+
+int node_children(rad_hier *h, uint32_t t, uint32_t out[4])
+{
+	if (node_is_cluster(t)) {
+		const rad_cluster *c = rad_cluster_at(h, t);
+		if (c->child != RAD_NONE) {
+			out[0] = (c->child) | RAD_TAG_CLUSTER;
+			out[1] = (c->child + 1) | RAD_TAG_CLUSTER;
+			return 2;
+		}
+		for (uint32_t i = 0; i < c->count; i++)
+			out[i] = h->order[c->first + i];
+		return (int)c->count;
+	}
+	uint32_t first = rad_elem_split(h, t);
+	if (first == RAD_NONE)
+		return 0;
+	for (uint32_t i = 0; i < 4; i++)
+		out[i] = first + i;
+	return 4;
+}
+
+/* 1 if some corner of box [lo, hi] lies strictly in front of the plane. */
+static int box_in_front(const float lo[3], const float hi[3], v3 p, v3 n)
+{
+	/* The corner furthest along n decides. */
+	v3 c = v3_make(n.x > 0 ? hi[0] : lo[0], n.y > 0 ? hi[1] : lo[1],
+	               n.z > 0 ? hi[2] : lo[2]);
+	return v3_dot(v3_sub(c, p), n) > 0;
+}
+
+/* 1 if some vertex of patch a lies strictly in front of patch b. */
+static int patch_in_front(const rad_patch *a, const rad_patch *b, double tol)
+{
+	v3 v[4];
+	int n = rad_patch_vertices(a, v);
+	for (int i = 0; i < n; i++)
+		if (v3_dot(v3_sub(v[i], b->p0), b->n) > tol)
+			return 1;
+	return 0;
+}
+
+static int light_faces_patch(const rad_light *L, const rad_patch *p)
+{
+	if (L->kind == RAD_LIGHT_DIRECTIONAL)
+		return v3_dot(v3_d(L->dir), p->n) < 0;
+	return v3_dot(v3_sub(v3_d(L->pos), p->p0), p->n) > 0;
+}
+
+int node_facing(const rad_hier *h, uint32_t rcv, uint32_t src)
+{
+	rad_patch pr, ps;
+	int rc = node_is_cluster(rcv), sc = node_is_cluster(src);
+	if (node_is_light(src))
+		return rc || (elem_patch(h, rcv, &pr),
+		              light_faces_patch(node_light(h, src), &pr));
+	if (rc && sc)
+		return 1;
+	if (rc) {
+		const rad_cluster *c = rad_cluster_at(h, rcv);
+		elem_patch(h, src, &ps);
+		return box_in_front(c->lo, c->hi, ps.p0, ps.n);
+	}
+	elem_patch(h, rcv, &pr);
+	if (sc) {
+		const rad_cluster *c = rad_cluster_at(h, src);
+		return box_in_front(c->lo, c->hi, pr.p0, pr.n);
+	}
+	elem_patch(h, src, &ps);
+	double tol = 1e-9 * h->scene->diag;
+	return patch_in_front(&ps, &pr, tol) && patch_in_front(&pr, &ps, tol);
+}
+
+static v3 node_center(const rad_hier *h, uint32_t t)
+{
+	if (node_is_cluster(t))
+		return cluster_center(rad_cluster_at(h, t));
+	rad_patch p;
+	elem_patch(h, t, &p);
+	return rad_patch_centroid(&p);
+}
+
+/* Isotropic estimate: source area-equivalent as over a distance d. */
+static double iso_ff(double as, double cosr, double d2)
+{
+	double f = as * cosr / (M_PI * d2 + as);
+	return f > 1 ? 1 : f;
+}
+
+static double light_estimate_cluster(const rad_hier *h, const rad_light *L,
+                                     uint32_t rcv)
+{
+	if (L->kind == RAD_LIGHT_DIRECTIONAL)
+		return 1.0;
+	double half = 0.5 * node_size(h, rcv);
+	v3 d = v3_sub(node_center(h, rcv), v3_d(L->pos));
+	return 1.0 / (v3_dot(d, d) + half * half);
+}
+
+double node_ff_estimate(const rad_hier *h, uint32_t rcv, uint32_t src)
+{
+	rad_patch pr, ps;
+	if (node_is_light(src)) {
+		if (node_is_cluster(rcv))
+			return light_estimate_cluster(h, node_light(h, src),
+			                              rcv);
+		elem_patch(h, rcv, &pr);
+		return rad_light_estimate(node_light(h, src), &pr);
+	}
+	if (!node_is_cluster(rcv) && !node_is_cluster(src)) {
+		elem_patch(h, rcv, &pr);
+		elem_patch(h, src, &ps);
+		return rad_ff_estimate(&pr, &ps);
+	}
+	v3 cr = node_center(h, rcv), cs = node_center(h, src);
+	v3 d = v3_sub(cs, cr);
+	double d2 = v3_dot(d, d), len = sqrt(d2);
+	double cosr = 1, as;
+	if (!node_is_cluster(rcv) && len > 0) {
+		elem_patch(h, rcv, &pr);
+		cosr = fmax(0, v3_dot(pr.n, d) / len);
+	}
+	if (node_is_cluster(src)) {
+		as = 0.25 * rad_cluster_at(h, src)->area;
+	} else {
+		elem_patch(h, src, &ps);
+		as = ps.area;
+		if (len > 0)
+			cosr *= fmax(0, -v3_dot(ps.n, d) / len);
+	}
+	return iso_ff(as, cosr, d2);
+}
+
+/* Up to n sample points (with normals) of a node. */
+static int node_points(const rad_hier *h, uint32_t t, int n, v3 *pts, v3 *nrm)
+{
+	if (node_is_cluster(t)) {
+		const rad_cluster *c = rad_cluster_at(h, t);
+		int m = (uint32_t)n < c->count ? n : (int)c->count;
+		for (int k = 0; k < m; k++) {
+			uint32_t j =
+			        c->first + (uint32_t)(((uint64_t)k * c->count) /
+			                              (uint32_t)m);
+			rad_patch p;
+			rad_patch_from_poly(&p, &h->scene->polys[h->order[j]]);
+			pts[k] = rad_patch_centroid(&p);
+			nrm[k] = p.n;
+		}
+		return m;
+	}
+	rad_patch p;
+	elem_patch(h, t, &p);
+	int m = rad_patch_samples(&p, n, pts);
+	for (int k = 0; k < m; k++)
+		nrm[k] = p.n;
+	return m;
+}
+
+/* Light -> cluster: normal irradiance at the cluster's sample points. */
+static double ff_light_cluster(const rad_solver *sv, const rad_light *L,
+                               uint32_t rcv, uint64_t *rays)
+{
+	v3 y[RAD_FF_MAX_SAMPLES], ny[RAD_FF_MAX_SAMPLES];
+	int m = node_points(&sv->h, rcv, sv->opt.rcv_samples, y, ny);
+	double acc = 0;
+	for (int k = 0; k < m; k++) {
+		v3 toward = L->kind == RAD_LIGHT_DIRECTIONAL
+		                    ? v3_scale(v3_d(L->dir), -1)
+		                    : v3_norm(v3_sub(v3_d(L->pos), y[k]));
+		/* Facing the light: kernel cosine 1, normal irradiance. */
+		acc += rad_light_point(sv->scene->vis, L, y[k], toward, rays);
+	}
+	return m ? acc / m : 0;
+}
+
+/*
+ * Pairs involving a cluster: average over receiver points x and source
+ * points y of the isotropic kernel times visibility.  Receiver cosine only
+ * for a surface receiver, source cosine only for a surface source.
+ */
+static double ff_iso(const rad_solver *sv, uint32_t rcv, uint32_t src,
+                     uint64_t *rays, double *spread)
+{
+	const rad_hier *h = &sv->h;
+	v3 x[RAD_FF_MAX_SAMPLES], nx[RAD_FF_MAX_SAMPLES];
+	v3 y[RAD_FF_MAX_SAMPLES], ny[RAD_FF_MAX_SAMPLES];
+	int mr = node_points(h, rcv, sv->opt.rcv_samples, x, nx);
+	int ms = node_points(h, src, sv->opt.vis_samples, y, ny);
+	int rsurf = !node_is_cluster(rcv), ssurf = !node_is_cluster(src);
+	double as = ssurf ? rad_elem_at(h, src)->area
+	                  : 0.25 * rad_cluster_at(h, src)->area;
+	double acc = 0, lo = INFINITY, hi = 0;
+	*spread = 0;
+	if (!mr || !ms)
+		return 0;
+	for (int i = 0; i < mr; i++) {
+		double row = 0; /* this receiver point's value, x ms */
+		for (int j = 0; j < ms; j++) {
+			v3 d = v3_sub(y[j], x[i]);
+			double d2 = v3_dot(d, d), len = sqrt(d2);
+			if (!(len > 0))
+				continue;
+			double c = 1;
+			if (rsurf)
+				c *= fmax(0, v3_dot(nx[i], d) / len);
+			if (ssurf)
+				c *= fmax(0, -v3_dot(ny[j], d) / len);
+			if (c <= 0)
+				continue;
+			if (rays)
+				(*rays)++;
+			if (rad_vis_segment(sv->scene->vis, x[i], &nx[i], y[j],
+			                    &ny[j]))
+				row += iso_ff(as, c, d2);
+		}
+		acc += row;
+		lo = fmin(lo, row);
+		hi = fmax(hi, row);
+	}
+	if (rsurf)
+		*spread = (hi - lo) / ms;
+	return acc / (mr * ms);
+}
+
+double node_ff(const rad_solver *sv, uint32_t rcv, uint32_t src, uint64_t *rays,
+               double *spread)
+{
+	const rad_hier *h = &sv->h;
+	rad_patch pr, ps;
+	if (node_is_light(src)) {
+		const rad_light *L = node_light(h, src);
+		if (node_is_cluster(rcv)) {
+			*spread = 0;
+			return ff_light_cluster(sv, L, rcv, rays);
+		}
+		elem_patch(h, rcv, &pr);
+		return rad_light_patch_spread(sv->scene->vis, L, &pr,
+		                              sv->opt.rcv_samples, rays,
+		                              spread);
+	}
+	if (node_is_cluster(rcv) || node_is_cluster(src))
+		return ff_iso(sv, rcv, src, rays, spread);
+	elem_patch(h, rcv, &pr);
+	elem_patch(h, src, &ps);
+	return rad_ff_patch_spread(sv->scene->vis, &pr, &ps,
+	                           sv->opt.rcv_samples, sv->opt.vis_samples,
+	                           rays, spread);
+}

@@ -1,0 +1,58 @@
+/*
+ * hr_nodes.h -- uniform view of link endpoints for the hierarchical
+ * solvers: a tagged id is a surface element, a cluster or a light, and the
+ * refinement code asks each the same questions (where, how big, how
+ * bright, can it split, what are its children) and gets form factors for
+ * any pair.  Cluster transfers use the isotropic volume model of
+ * ALGORITHM.md §2 (emitter factor 1, receiver factor 1, area A/4).
+ */
+#ifndef LUXRAD_HR_NODES_H
+#define LUXRAD_HR_NODES_H
+
+#include "ff.h"
+#include "hier.h"
+#include "solver.h"
+
+static inline int node_is_cluster(uint32_t t)
+{
+	return (t & RAD_TAG_CLUSTER) != 0;
+}
+static inline int node_is_light(uint32_t t)
+{
+	return (t & RAD_TAG_LIGHT) != 0;
+}
+static inline uint32_t node_index(uint32_t t)
+{
+	return t & ~RAD_TAG_MASK;
+}
+
+/* Photopic radiosity of a source node (a light: its intensity). */
+double node_luma_B(const rad_hier *h, uint32_t t);
+/* RGB radiosity of a source node, as doubles. */
+void node_B(const rad_hier *h, uint32_t t, double out[3]);
+/* Area that turns the node's irradiance into received flux. */
+double node_area_eff(const rad_hier *h, uint32_t t);
+/* 1 if the node can be split into children. */
+int node_splittable(const rad_hier *h, uint32_t t);
+/* Characteristic length: longest edge (element), box diagonal (cluster). */
+double node_size(const rad_hier *h, uint32_t t);
+/*
+ * Children of a splittable node, tagged, into out[RAD_CLUSTER_LEAF_MAX]
+ * (elements are split on demand: not thread-safe).  Returns the count, 0
+ * when out of memory.
+ */
+int node_children(rad_hier *h, uint32_t t, uint32_t out[4]);
+
+/* 0 when src cannot send anything to rcv (both sides face away). */
+int node_facing(const rad_hier *h, uint32_t rcv, uint32_t src);
+/* Cheap unoccluded estimate of F(rcv <- src), for the oracle. */
+double node_ff_estimate(const rad_hier *h, uint32_t rcv, uint32_t src);
+/*
+ * F(rcv <- src) with visibility (see rad_link.ff), and its spread over the
+ * receiver's points (0 for a cluster receiver, which has no variation to
+ * resolve: it is isotropic).  Thread-safe.
+ */
+double node_ff(const rad_solver *sv, uint32_t rcv, uint32_t src, uint64_t *rays,
+               double *spread);
+
+#endif
