@@ -105,6 +105,8 @@ static const cli_option cli_options[] = {
          "refinement test: bfa (flux) | bf (exitance) | f (form factor)"},
         {"no-clustering", NULL, OPT_FLAG_OFF, OPT(clustering), 0, 0, 0, 0,
          "hr: no volume clusters (every polygon pair linked)"},
+        {"variation", "X", OPT_DOUBLE, OPT(variation), 0, 0, 1e9, 3,
+         "hr: receiver accuracy, fraction of the mean radiosity"},
         {"min-edge", "X", OPT_DOUBLE, OPT(min_edge_rel), 0, 0, 1, 3,
          "smallest element edge, fraction of the scene diagonal"},
         {"mesh-edge", "X", OPT_DOUBLE, OPT(mesh_edge_rel), 0, 0, 1, 1,

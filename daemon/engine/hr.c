@@ -171,10 +171,19 @@ static uint8_t evaluate(rad_solver *sv, uint32_t r, uint32_t s, float *ff,
 	if (may_split && node_splittable(h, r) && spread_fails(sv, s, sp))
 		return ACT_SPLIT_RCV;
 	/* A cluster's few sample points seeing nothing of the other end
-	 * prove nothing about its contents: look closer rather than drop
-	 * the pair for good.  Between surfaces the samples cover both. */
-	if (!(f > 0) && may_split && (node_is_cluster(r) || node_is_cluster(s)))
-		return ACT_SPLIT;
+	 * prove nothing about its contents.  While the pair could carry
+	 * little even at its bound (box gap), keep it as a zero link that
+	 * later iterations re-test on that bound (see retest_list); else
+	 * look closer now.  Between
+	 * surfaces the samples cover both ends and zero means zero. */
+	if (!(f > 0) && (node_is_cluster(r) || node_is_cluster(s))) {
+		if (may_split &&
+		    oracle(sv, r, s, node_ff_bound(h, r, s)) > sv->opt.eps)
+			return ACT_SPLIT;
+		*ff = 0;
+		*spread = 0;
+		return ACT_STORE;
+	}
 	*ff = (float)f;
 	*spread = (float)sp;
 	return f > 0 ? ACT_STORE : ACT_DROP;
@@ -417,8 +426,11 @@ static rad_status retest_list(rad_solver *sv, hr_state *st, uint32_t *head,
 	double total = 0;
 	for (uint32_t *prev = head; *prev != RAD_NONE;) {
 		rad_link *l = rad_link_at(h, *prev);
+		/* A zero link (cluster pair whose samples saw nothing) is
+		 * judged on its bound: its sources may have lit up. */
+		double f = l->ff > 0 ? l->ff : node_ff_bound(h, l->rcv, l->src);
 		if (pair_refinable(h, l->rcv, l->src) &&
-		    oracle(sv, l->rcv, l->src, l->ff) > sv->opt.eps) {
+		    oracle(sv, l->rcv, l->src, f) > sv->opt.eps) {
 			rad_status rs = requeue(sv, st, prev, 0);
 			if (rs)
 				return rs;

@@ -333,3 +333,45 @@ double node_ff(const rad_solver *sv, uint32_t rcv, uint32_t src, uint64_t *rays,
 	                           sv->opt.rcv_samples, sv->opt.vis_samples,
 	                           rays, spread);
 }
+
+/* Axis-aligned bounds of a node, as doubles. */
+static void node_box(const rad_hier *h, uint32_t t, double lo[3], double hi[3])
+{
+	if (node_is_cluster(t)) {
+		const rad_cluster *c = rad_cluster_at(h, t);
+		for (int k = 0; k < 3; k++) {
+			lo[k] = c->lo[k];
+			hi[k] = c->hi[k];
+		}
+		return;
+	}
+	rad_patch p;
+	v3 v[4];
+	elem_patch(h, t, &p);
+	int n = rad_patch_vertices(&p, v);
+	lo[0] = hi[0] = v[0].x;
+	lo[1] = hi[1] = v[0].y;
+	lo[2] = hi[2] = v[0].z;
+	for (int i = 1; i < n; i++) {
+		double q[3] = {v[i].x, v[i].y, v[i].z};
+		for (int k = 0; k < 3; k++) {
+			lo[k] = fmin(lo[k], q[k]);
+			hi[k] = fmax(hi[k], q[k]);
+		}
+	}
+}
+
+double node_ff_bound(const rad_hier *h, uint32_t rcv, uint32_t src)
+{
+	double rl[3], rh[3], sl[3], sh[3], d2 = 0;
+	node_box(h, rcv, rl, rh);
+	node_box(h, src, sl, sh);
+	for (int k = 0; k < 3; k++) {
+		double gap = fmax(0, fmax(sl[k] - rh[k], rl[k] - sh[k]));
+		d2 += gap * gap;
+	}
+	double as = node_is_cluster(src) ? rad_cluster_at(h, src)->area
+	                                 : rad_elem_at(h, src)->area;
+	double f = as / (M_PI * d2);
+	return d2 > 0 && f < 1 ? f : 1;
+}

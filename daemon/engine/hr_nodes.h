@@ -45,6 +45,11 @@ int node_children(rad_hier *h, uint32_t t, uint32_t out[4]);
 
 /* 0 when src cannot send anything to rcv (both sides face away). */
 int node_facing(const rad_hier *h, uint32_t rcv, uint32_t src);
+/*
+ * Upper bound of F(rcv <- src) from the gap between the two bounding
+ * boxes, whatever the orientations inside (1 when the boxes touch).
+ */
+double node_ff_bound(const rad_hier *h, uint32_t rcv, uint32_t src);
 /* Cheap unoccluded estimate of F(rcv <- src), for the oracle. */
 double node_ff_estimate(const rad_hier *h, uint32_t rcv, uint32_t src);
 /*

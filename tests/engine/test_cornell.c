@@ -71,7 +71,7 @@ static void solve(const rad_scene *s, rad_solver_kind kind, int threads,
 	rad_error err;
 	if (rad_solver_new(s, &o, &sv, &err))
 		fail_msg("%s: %s", rad_solver_kind_name(kind), err.msg);
-	if (rad_solver_converge(sv, 1e-4, 5000, &err))
+	if (rad_solver_converge(sv, 1e-3, 5000, &err))
 		fail_msg("%s: %s", rad_solver_kind_name(kind), err.msg);
 	assert_int_equal(
 	        rad_solver_illuminance(sv, &points[0][0], NPTS, lux, &err),
