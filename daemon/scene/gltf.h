@@ -40,30 +40,34 @@ typedef struct rad_gltf_info {
  * *out is NULL and nothing is leaked.
  */
 rad_status rad_gltf_load(const void *bytes, size_t len, rad_scene **out,
-			 rad_gltf_info *info, rad_error *err);
+                         rad_gltf_info *info, rad_error *err);
 
 typedef struct rad_gltf_mesh {
-	const char *name;       /* node and mesh name; may be NULL */
-	const float *position;  /* 3 floats per vertex */
-	const float *color;     /* COLOR_0, 3 floats per vertex (linear); NULL */
+	const char *name;      /* node and mesh name; may be NULL */
+	const float *position; /* 3 floats per vertex */
+	const float *color;    /* COLOR_0, 3 floats per vertex (linear); NULL */
 	const float *illuminance; /* _ILLUMINANCE, 1 float per vertex; NULL */
-	const uint32_t *index;  /* 3 per triangle; NULL = non-indexed */
+	const uint32_t *index;    /* 3 per triangle; NULL = non-indexed */
 	size_t nvertices, nindices;
-	double base_color[3];   /* reflectance */
-	double emissive[3];     /* emissiveFactor, in [0,1] */
-	double emissive_strength; /* KHR_materials_emissive_strength; 1 = none */
+	double base_color[3];     /* reflectance */
+	double emissive[3];       /* emissiveFactor, in [0,1] */
+	double emissive_strength; /* KHR_materials_emissive_strength; 1 = none
+	                           */
 } rad_gltf_mesh;
 
-typedef enum rad_gltf_format { RAD_GLTF_GLB = 0, RAD_GLTF_JSON } rad_gltf_format;
+typedef enum rad_gltf_format {
+	RAD_GLTF_GLB = 0,
+	RAD_GLTF_JSON
+} rad_gltf_format;
 
 /*
  * Serialize meshes and lights.  *out is malloc'ed (caller frees with
  * free()); JSON output embeds buffers as data: URIs.
  */
 rad_status rad_gltf_write(const rad_gltf_mesh *meshes, size_t nmeshes,
-			  const rad_light_desc *lights, size_t nlights,
-			  rad_gltf_format fmt, void **out, size_t *outlen,
-			  rad_error *err);
+                          const rad_light_desc *lights, size_t nlights,
+                          rad_gltf_format fmt, void **out, size_t *outlen,
+                          rad_error *err);
 
 #ifdef __cplusplus
 }
