@@ -64,7 +64,7 @@ test_help() {
 	run --help
 	expect_exit "--help exits 0" 0
 	for opt in solver eps iterations converge max-iterations threads \
-		points json per-iteration oracle no-clustering min-edge \
+		points json per-iteration oracle no-clustering variation min-edge \
 		mesh-edge rcv-samples vis-samples help; do
 		grep -qF -- "--$opt" "$TMP/out" || missing="$missing --$opt"
 	done
