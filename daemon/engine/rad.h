@@ -184,7 +184,7 @@ typedef struct rad_options {
 	rad_oracle oracle;
 	/*
 	 * Refinement threshold.  BFA: fraction of the total emitted flux a
-	 * link may carry; BF: fraction of the largest exitance; F: form
+	 * link may carry; BF: fraction of the mean emitted exitance; F: form
 	 * factor.  Smaller is finer, slower, bigger.
 	 */
 	double eps;
