@@ -28,6 +28,18 @@
  * Oracle values are fractions of the scene's total source flux (BFA),
  * of its mean exitance (BF), or plain form factors (F); a link is split
  * while its value exceeds eps and one of its ends can be split.
+ *
+ * Energy alone picks the level of the source, not of the receiver: a leaf
+ * receives every link of its ancestors, each averaged over a larger
+ * region, and near corners those errors add up.  So each link also keeps
+ * its spread over the receiver's points, and the re-test walks every
+ * quadtree top-down summing the links' error bounds (half the spread,
+ * times the source's radiosity); where the sum passes `variation` times
+ * the mean radiosity, the worst links move to the children.
+ *
+ * A cluster pair whose few sample points see nothing of each other is not
+ * proof of zero transfer: it is kept as a zero link and re-tested on an
+ * upper bound of F from the gap between the two boxes.
  */
 #include <math.h>
 #include <stdlib.h>
