@@ -361,51 +361,6 @@ static int parse_args(int argc, char **argv, cli_args *a)
 
 /* ----------------------------------------------------------------- input */
 
-/* Read a whole file; *out is malloc'ed.  Prints the error itself. */
-static int read_file(const char *path, unsigned char **out, size_t *len)
-{
-	FILE *f = fopen(path, "rb");
-	unsigned char *buf = NULL;
-	size_t n = 0, cap = 0;
-
-	if (!f) {
-		fprintf(stderr, "luxrad-solve: cannot open '%s': %s\n", path,
-		        strerror(errno));
-		return EXIT_SOLVE;
-	}
-	for (;;) {
-		if (n == cap) {
-			size_t ncap = cap ? 2 * cap : (size_t)1 << 16;
-			unsigned char *nb = realloc(buf, ncap);
-			if (!nb) {
-				fprintf(stderr,
-				        "luxrad-solve: out of memory "
-				        "reading '%s'\n",
-				        path);
-				break;
-			}
-			buf = nb;
-			cap = ncap;
-		}
-		size_t got = fread(buf + n, 1, cap - n, f);
-		n += got;
-		if (got == 0)
-			break;
-	}
-	if (n < cap && ferror(f)) {
-		fprintf(stderr, "luxrad-solve: cannot read '%s': %s\n", path,
-		        strerror(errno));
-	} else if (n < cap) {
-		fclose(f);
-		*out = buf;
-		*len = n;
-		return EXIT_OKAY;
-	}
-	fclose(f);
-	free(buf);
-	return EXIT_SOLVE;
-}
-
 typedef struct point_list {
 	double *xyz; /* 6 doubles per point: position, normal */
 	size_t n, cap;
@@ -807,12 +762,14 @@ static int load_scene(const char *path, rad_scene **sc, rad_gltf_info *info,
 	unsigned char *bytes = NULL;
 	size_t len = 0;
 	rad_error err = {0};
-	int rc = read_file(path, &bytes, &len);
+	rad_status st = rad_file_read(path, &bytes, &len, &err);
 
-	if (rc != EXIT_OKAY)
-		return rc;
+	if (st != RAD_OK) {
+		fprintf(stderr, "luxrad-solve: %s\n", err.msg);
+		return EXIT_SOLVE;
+	}
 	double t0 = now_seconds();
-	rad_status st = rad_gltf_load(bytes, len, sc, info, &err);
+	st = rad_gltf_load(bytes, len, sc, info, &err);
 	*seconds = now_seconds() - t0;
 	free(bytes);
 	if (st != RAD_OK) {

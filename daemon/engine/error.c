@@ -15,6 +15,7 @@ static const char *const status_names[] = {
         [RAD_ERR_EMBREE] = "embree",
         [RAD_ERR_CANCELLED] = "cancelled",
         [RAD_ERR_LIMIT] = "limit",
+        [RAD_ERR_IO] = "io",
 };
 
 const char *rad_status_name(rad_status st)

@@ -41,6 +41,7 @@ typedef enum rad_status {
 	RAD_ERR_EMBREE,      /* the ray tracing kernel reported an error */
 	RAD_ERR_CANCELLED,   /* the caller's cancel flag was raised */
 	RAD_ERR_LIMIT,       /* a configured limit (memory budget...) was hit */
+	RAD_ERR_IO,          /* a file could not be read (tools only) */
 } rad_status;
 
 typedef struct rad_error {

@@ -42,6 +42,18 @@ typedef struct rad_gltf_info {
 rad_status rad_gltf_load(const void *bytes, size_t len, rad_scene **out,
                          rad_gltf_info *info, rad_error *err);
 
+/*
+ * Read a whole file (scene_file.c): *out is malloc'ed, caller frees with
+ * free().  RAD_ERR_IO names the path and the system's reason.  For local
+ * tools and tests only: the daemon never reads a path a client names.
+ */
+rad_status rad_file_read(const char *path, unsigned char **out, size_t *len,
+                         rad_error *err);
+
+/* rad_file_read() then rad_gltf_load(). */
+rad_status rad_gltf_load_file(const char *path, rad_scene **out,
+                              rad_gltf_info *info, rad_error *err);
+
 typedef struct rad_gltf_mesh {
 	const char *name;      /* node and mesh name; may be NULL */
 	const float *position; /* 3 floats per vertex */

@@ -122,36 +122,15 @@ static int parse_args(int argc, char **argv, bench_args *a)
 	return a->nscenes > 0 ? 0 : -1;
 }
 
-static unsigned char *slurp(const char *path, size_t *len)
-{
-	FILE *f = fopen(path, "rb");
-	unsigned char *buf = NULL;
-	long n;
-
-	if (!f)
-		return NULL;
-	if (fseek(f, 0, SEEK_END) == 0 && (n = ftell(f)) >= 0 &&
-	    fseek(f, 0, SEEK_SET) == 0 && (buf = malloc((size_t)n + 1)) &&
-	    fread(buf, 1, (size_t)n, f) == (size_t)n) {
-		*len = (size_t)n;
-	} else {
-		free(buf);
-		buf = NULL;
-	}
-	fclose(f);
-	return buf;
-}
-
 /* Load the scene, then time a BVH rebuild on its own. */
 static int bench_load(const char *path, rad_scene **sc, bench_result *r)
 {
 	rad_error err = {0};
 	rad_mem_report m;
-	unsigned char *bytes = slurp(path, &r->file_bytes);
+	unsigned char *bytes;
 
-	if (!bytes) {
-		fprintf(stderr, "luxrad-bench: cannot read %s: %s\n", path,
-		        strerror(errno));
+	if (rad_file_read(path, &bytes, &r->file_bytes, &err) != RAD_OK) {
+		fprintf(stderr, "luxrad-bench: %s\n", err.msg);
 		return -1;
 	}
 	double t0 = now_s();

@@ -39,19 +39,9 @@ static const double points[][6] = {
 static rad_scene *load_cornell(void)
 {
 	const char *path = LUXRAD_SOURCE_DIR "/scenes/cornell.gltf";
-	FILE *f = fopen(path, "rb");
-	assert_non_null(f);
-	fseek(f, 0, SEEK_END);
-	long n = ftell(f);
-	fseek(f, 0, SEEK_SET);
-	char *buf = malloc((size_t)n);
-	assert_non_null(buf);
-	assert_int_equal(fread(buf, 1, (size_t)n, f), (size_t)n);
-	fclose(f);
 	rad_scene *s = NULL;
 	rad_error err;
-	rad_status st = rad_gltf_load(buf, (size_t)n, &s, NULL, &err);
-	free(buf);
+	rad_status st = rad_gltf_load_file(path, &s, NULL, &err);
 	if (st)
 		fail_msg("load %s: %s", path, err.msg);
 	return s;

@@ -33,33 +33,20 @@
 
 extern char **environ;
 
+/* Whole file, or NULL (the message does not matter to the callers). */
 static unsigned char *read_all(const char *path, size_t *len)
 {
-	FILE *f = fopen(path, "rb");
-	if (!f)
-		return NULL;
-	unsigned char *buf = NULL;
-	long n = fseek(f, 0, SEEK_END) == 0 ? ftell(f) : -1;
-	if (n > 0 && fseek(f, 0, SEEK_SET) == 0 && (buf = malloc((size_t)n)))
-		if (fread(buf, 1, (size_t)n, f) != (size_t)n) {
-			free(buf);
-			buf = NULL;
-		}
-	fclose(f);
-	*len = (size_t)n;
-	return buf;
+	unsigned char *buf;
+	rad_error err;
+	return rad_file_read(path, &buf, len, &err) == RAD_OK ? buf : NULL;
 }
 
 /* Load a scene file, fail the test on any error or skipped triangle. */
 static rad_scene *load(const char *path, rad_scene_counts *c)
 {
-	size_t len = 0;
-	unsigned char *bytes = read_all(path, &len);
-	assert_non_null(bytes);
 	rad_scene *s = NULL;
 	rad_error err = {0};
-	rad_status st = rad_gltf_load(bytes, len, &s, NULL, &err);
-	free(bytes);
+	rad_status st = rad_gltf_load_file(path, &s, NULL, &err);
 	if (st != RAD_OK)
 		fail_msg("%s: %s", path, err.msg);
 	rad_scene_counts_get(s, c);
