@@ -84,7 +84,8 @@ typedef struct cli_option {
 
 static const cli_option cli_options[] = {
         {"solver", "NAME", OPT_SOLVER, OPT(solver), 0, 0, 0, 0,
-         "matrix | progressive | hr (hierarchical radiosity)"},
+         "matrix | progressive | hr (hierarchical radiosity) | rmb "
+         "(reduced-memory hr)"},
         {"eps", "X", OPT_DOUBLE, OPT(eps), 0, 0, 1e9, 1,
          "refinement threshold, > 0; smaller is finer (see --oracle)"},
         {"iterations", "N", OPT_U32, ARG(iterations), 0, 1, 1e9, 0,
@@ -104,9 +105,13 @@ static const cli_option cli_options[] = {
         {"oracle", "NAME", OPT_ORACLE, OPT(oracle), 0, 0, 0, 0,
          "refinement test: bfa (flux) | bf (exitance) | f (form factor)"},
         {"no-clustering", NULL, OPT_FLAG_OFF, OPT(clustering), 0, 0, 0, 0,
-         "hr: no volume clusters (every polygon pair linked)"},
+         "hr, rmb: no volume clusters (every polygon pair linked)"},
+        {"anticipate", NULL, OPT_FLAG_ON, OPT(store), 0, 0, 0, 0,
+         "rmb: also drop links a coarser level will serve next time"},
+        {"study", NULL, OPT_FLAG_ON, OPT(study), 0, 0, 0, 0,
+         "count re-created links (memory counted as \"study\")"},
         {"variation", "X", OPT_DOUBLE, OPT(variation), 0, 0, 1e9, 3,
-         "hr: receiver accuracy, fraction of the mean radiosity"},
+         "hr, rmb: receiver accuracy, fraction of the mean radiosity"},
         {"min-edge", "X", OPT_DOUBLE, OPT(min_edge_rel), 0, 0, 1, 3,
          "smallest element edge, fraction of the scene diagonal"},
         {"mesh-edge", "X", OPT_DOUBLE, OPT(mesh_edge_rel), 0, 0, 1, 1,
@@ -555,6 +560,8 @@ static json_t *json_memory(const rad_mem_report *m)
 {
 	json_t *o = json_object();
 	json_object_set_new(o, "total", json_integer(m->total));
+	json_object_set_new(o, "peak_total", json_integer(m->peak_total));
+	json_object_set_new(o, "peak_work", json_integer(m->peak_work));
 	for (int k = 0; k < RAD_MEM_NKINDS; k++)
 		json_object_set_new(o, rad_mem_kind_name((rad_mem_kind)k),
 		                    json_integer(m->bytes[k]));
@@ -569,8 +576,9 @@ static json_t *json_memory(const rad_mem_report *m)
 #define STATS_COUNTERS(X)                                                      \
 	X(iteration) X(links) X(links_ss) X(links_sc) X(links_cc)              \
 	X(links_light) X(links_active) X(links_passive) X(links_created)       \
-	X(links_deleted) X(elements) X(clusters) X(leaves) X(refinements)      \
-	X(rays)
+	X(links_deleted) X(links_recreated) X(links_gathered)                  \
+	X(links_transient) X(links_useful) X(elements) X(clusters) X(leaves)   \
+	X(refinements) X(rays)
 #define SCENE_COUNTERS(X)                                                      \
 	X(triangles_in) X(triangles_nonfinite) X(triangles_degenerate)         \
 	X(polygons) X(quads) X(materials) X(materials_offered) X(lights)       \
@@ -590,6 +598,10 @@ static json_t *json_iteration(const rad_stats *s)
 	json_object_set_new(o, "residual", jreal(s->residual));
 	json_object_set_new(o, "error_estimate", jreal(s->error_estimate));
 	json_object_set_new(o, "memory_bytes", json_memory(&s->mem));
+	json_t *h = json_array();
+	for (int k = 0; k < RAD_EHIST_BINS; k++)
+		json_array_append_new(h, jint(s->energy_hist[k]));
+	json_object_set_new(o, "energy_hist", h);
 	return o;
 }
 

@@ -132,14 +132,6 @@ static rad_status build_cluster(rad_hier *h, uint32_t c, rad_error *err)
 	return st ? st : build_cluster(h, kids + 1, err);
 }
 
-static uint32_t shift_for(uint32_t n)
-{
-	uint32_t s = 10;
-	while (s < 30 && (1u << s) < n)
-		s++;
-	return s;
-}
-
 rad_status rad_hier_init(rad_hier *h, const rad_scene *s, rad_mem *mem,
                          double min_edge, rad_error *err)
 {
@@ -150,10 +142,10 @@ rad_status rad_hier_init(rad_hier *h, const rad_scene *s, rad_mem *mem,
 	uint32_t n = s->npolys;
 	/* The roots must be one run: size the first block to hold them. */
 	rad_pool_init(&h->elems, mem, RAD_MEM_ELEM_SURFACE, sizeof(rad_elem),
-	              shift_for(n));
+	              12, n);
 	rad_pool_init(&h->clusters, mem, RAD_MEM_ELEM_CLUSTER,
-	              sizeof(rad_cluster), shift_for(n / 2 + 1));
-	rad_pool_init(&h->links, mem, RAD_MEM_LINKS, sizeof(rad_link), 12);
+	              sizeof(rad_cluster), 12, 0);
+	rad_pool_init(&h->links, mem, RAD_MEM_LINKS, sizeof(rad_link), 12, 0);
 	if (n == 0)
 		return rad_fail(err, RAD_ERR_INVALID, "scene has no polygons");
 	h->order =
@@ -323,45 +315,96 @@ void rad_hier_reset_emission(rad_hier *h)
 	rad_hier_pull(h);
 }
 
-/* Post-order: B of an inner element is the area average of its children. */
+/* Area-weighted sums of B and dB into acc[0..5]. */
+static void acc_node(double acc[6], float area, const float B[3],
+                     const float dB[3])
+{
+	for (int c = 0; c < 3; c++) {
+		acc[c] += (double)area * B[c];
+		acc[3 + c] += (double)area * dB[c];
+	}
+}
+
+static void set_avg(float B[3], float dB[3], const double acc[6], double area)
+{
+	for (int c = 0; c < 3; c++) {
+		B[c] = area > 0 ? (float)(acc[c] / area) : 0;
+		dB[c] = area > 0 ? (float)(acc[3 + c] / area) : 0;
+	}
+}
+
+/* Post-order: B and dB of an inner element are its children's averages. */
 static void pull_elem(rad_hier *h, uint32_t id)
 {
 	rad_elem *e = rad_elem_at(h, id);
 	if (e->child == RAD_NONE)
 		return;
-	double acc[3] = {0, 0, 0}, area = 0;
+	double acc[6] = {0}, area = 0;
 	for (uint32_t k = 0; k < 4; k++) {
 		pull_elem(h, e->child + k);
 		const rad_elem *ch = rad_elem_at(h, e->child + k);
-		for (int c = 0; c < 3; c++)
-			acc[c] += (double)ch->area * ch->B[c];
+		acc_node(acc, ch->area, ch->B, ch->dB);
 		area += ch->area;
 	}
-	for (int c = 0; c < 3; c++)
-		e->B[c] = (float)(acc[c] / area);
+	set_avg(e->B, e->dB, acc, area);
 }
 
 static void pull_cluster(rad_hier *h, uint32_t id)
 {
 	rad_cluster *cl = rad_cluster_at(h, id);
-	double acc[3] = {0, 0, 0};
+	double acc[6] = {0};
 	if (cl->child != RAD_NONE) {
 		for (uint32_t k = 0; k < 2; k++) {
 			pull_cluster(h, cl->child + k);
 			const rad_cluster *ch =
 			        rad_cluster_at(h, cl->child + k);
-			for (int c = 0; c < 3; c++)
-				acc[c] += (double)ch->area * ch->B[c];
+			acc_node(acc, ch->area, ch->B, ch->dB);
 		}
 	} else {
 		for (uint32_t j = cl->first; j < cl->first + cl->count; j++) {
 			const rad_elem *e = rad_elem_at(h, h->order[j]);
-			for (int c = 0; c < 3; c++)
-				acc[c] += (double)e->area * e->B[c];
+			acc_node(acc, e->area, e->B, e->dB);
 		}
 	}
+	set_avg(cl->B, cl->dB, acc, cl->area);
+}
+
+static void push_elem(rad_hier *h, uint32_t id, const float up[3],
+                      rad_leaf_update leaf, void *ud)
+{
+	rad_elem *e = rad_elem_at(h, id);
 	for (int c = 0; c < 3; c++)
-		cl->B[c] = cl->area > 0 ? (float)(acc[c] / cl->area) : 0;
+		e->I[c] += up[c];
+	if (e->child == RAD_NONE) {
+		leaf(h, e, ud);
+		return;
+	}
+	for (uint32_t k = 0; k < 4; k++)
+		push_elem(h, e->child + k, e->I, leaf, ud);
+}
+
+static void push_cluster(rad_hier *h, uint32_t id, const float up[3],
+                         rad_leaf_update leaf, void *ud)
+{
+	rad_cluster *cl = rad_cluster_at(h, id);
+	for (int c = 0; c < 3; c++)
+		cl->I[c] += up[c];
+	if (cl->child != RAD_NONE) {
+		push_cluster(h, cl->child, cl->I, leaf, ud);
+		push_cluster(h, cl->child + 1, cl->I, leaf, ud);
+		return;
+	}
+	float quarter[3];
+	for (int c = 0; c < 3; c++)
+		quarter[c] = 0.25f * cl->I[c];
+	for (uint32_t j = cl->first; j < cl->first + cl->count; j++)
+		push_elem(h, h->order[j], quarter, leaf, ud);
+}
+
+void rad_hier_push(rad_hier *h, rad_leaf_update leaf, void *ud)
+{
+	const float zero[3] = {0, 0, 0};
+	push_cluster(h, 0, zero, leaf, ud);
 }
 
 void rad_hier_pull(rad_hier *h)

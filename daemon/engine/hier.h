@@ -139,10 +139,19 @@ rad_status rad_hier_mesh_uniform(rad_hier *h, double edge, rad_error *err);
 void rad_hier_reset_emission(rad_hier *h);
 
 /*
- * Pull: recompute B on inner surface elements and clusters as area
- * averages of the leaves' B.  Reads and writes B only.
+ * Pull: recompute B and dB on inner surface elements and clusters as area
+ * averages of the leaves' values.
  */
 void rad_hier_pull(rad_hier *h);
+
+/*
+ * Push: add each node's I to its children's, down the cluster tree (a
+ * polygon gets its leaf cluster's I times 1/4, the sphere average of cos+
+ * for the isotropic receiver) and the quadtrees, and call leaf() on every
+ * surface leaf with its total irradiance in e->I.
+ */
+typedef void (*rad_leaf_update)(rad_hier *h, rad_elem *leaf, void *ud);
+void rad_hier_push(rad_hier *h, rad_leaf_update leaf, void *ud);
 
 /* Material of the polygon an element belongs to. */
 static inline const rad_material *rad_elem_mat(const rad_hier *h,

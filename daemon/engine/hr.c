@@ -108,31 +108,10 @@ static void vec_free(rad_solver *sv, hr_vec *v)
 	memset(v, 0, sizeof(*v));
 }
 
-/* Oracle value of a transfer with form factor f, in units of eps. */
+/* Oracle value of the link on the source's full radiosity. */
 static double oracle(const rad_solver *sv, uint32_t rcv, uint32_t src, double f)
 {
-	const rad_hier *h = &sv->h;
-	double b = node_luma_B(h, src);
-	/* The isotropic model of a cluster can be off by its factor 1/4 either
-	 * way (a polygon facing the other end gets cos ~ 1, not 1/4): count
-	 * the transfer at its possible worst, so that the threshold bounds the
-	 * error rather than the model's own estimate of it. */
-	if (node_is_cluster(rcv))
-		f *= 4;
-	if (node_is_cluster(src))
-		f *= 4;
-	rad_oracle o = sv->opt.oracle;
-	if (node_is_light(src) && o == RAD_ORACLE_F)
-		o = RAD_ORACLE_BFA; /* a light's "form factor" is in lux/cd */
-	switch (o) {
-	case RAD_ORACLE_F:
-		return f;
-	case RAD_ORACLE_BF:
-		return b * f * h->scene->total_area / sv->flux_scale;
-	case RAD_ORACLE_BFA:
-	default:
-		return b * f * node_area_eff(h, rcv) / sv->flux_scale;
-	}
+	return node_oracle(sv, rcv, src, node_luma_B(&sv->h, src), f);
 }
 
 /*
@@ -262,17 +241,6 @@ static rad_status run_wave(rad_solver *sv, hr_state *st)
 	return RAD_OK;
 }
 
-/* Which end of a failing pair to split: 1 receiver, 2 source, 3 both. */
-static int split_side(const rad_hier *h, uint32_t r, uint32_t s)
-{
-	if (r == s)
-		return 3;
-	int rs = node_splittable(h, r), ss = node_splittable(h, s);
-	if (rs && ss)
-		return node_size(h, r) >= node_size(h, s) ? 1 : 2;
-	return rs ? 1 : 2;
-}
-
 /* Turn the pairs to split into the children pairs of the next wave. */
 static rad_status expand_splits(rad_solver *sv, hr_state *st)
 {
@@ -281,7 +249,7 @@ static rad_status expand_splits(rad_solver *sv, hr_state *st)
 		hr_pair p = st->split.v[i];
 		uint32_t kr[4] = {p.rcv}, ks[4] = {p.src};
 		int nr = 1, ns = 1;
-		int side = p.rcv_only ? 1 : split_side(h, p.rcv, p.src);
+		int side = node_split_side(h, p.rcv, p.src, (int)p.rcv_only);
 		if (side & 1)
 			nr = node_children(h, p.rcv, kr);
 		if (side == 3) {
@@ -576,53 +544,26 @@ typedef struct push_acc {
 	double change, total; /* sum A |dB|, sum A B (photopic) */
 } push_acc;
 
-/* Irradiance inherited from above is added; leaves get B = E + rho I. */
-static void push_elem(rad_hier *h, uint32_t id, const float up[3],
-                      push_acc *acc)
+/* A leaf's update: B = E + rho I. */
+static void update_leaf(rad_hier *h, rad_elem *e, void *ud)
 {
-	rad_elem *e = rad_elem_at(h, id);
-	for (int c = 0; c < 3; c++)
-		e->I[c] += up[c];
-	if (e->child != RAD_NONE) {
-		for (uint32_t k = 0; k < 4; k++)
-			push_elem(h, e->child + k, e->I, acc);
-		return;
-	}
+	push_acc *acc = ud;
 	const rad_material *m = rad_elem_mat(h, e);
 	float nb[3];
 	for (int c = 0; c < 3; c++)
 		nb[c] = m->emit[c] + m->rho[c] * e->I[c];
 	acc->change += e->area * fabs(rad_luma(nb) - rad_luma(e->B));
 	acc->total += e->area * rad_luma(nb);
+	for (int c = 0; c < 3; c++) /* the change: study statistics */
+		e->dB[c] = nb[c] - e->B[c];
 	memcpy(e->B, nb, sizeof(nb));
-}
-
-static void push_cluster(rad_hier *h, uint32_t id, const float up[3],
-                         push_acc *acc)
-{
-	rad_cluster *cl = rad_cluster_at(h, id);
-	for (int c = 0; c < 3; c++)
-		cl->I[c] += up[c];
-	if (cl->child != RAD_NONE) {
-		push_cluster(h, cl->child, cl->I, acc);
-		push_cluster(h, cl->child + 1, cl->I, acc);
-		return;
-	}
-	/* A polygon receives the cluster's normal irradiance times the
-	 * sphere average of cos+, 1/4. */
-	float quarter[3];
-	for (int c = 0; c < 3; c++)
-		quarter[c] = 0.25f * cl->I[c];
-	for (uint32_t j = cl->first; j < cl->first + cl->count; j++)
-		push_elem(h, h->order[j], quarter, acc);
 }
 
 /* Push irradiance down, update the leaves, pull; returns the residual. */
 static double push_and_update(rad_hier *h, double *mean_B)
 {
 	push_acc acc = {0, 0};
-	const float zero[3] = {0, 0, 0};
-	push_cluster(h, 0, zero, &acc);
+	rad_hier_push(h, update_leaf, &acc);
 	rad_hier_pull(h);
 	*mean_B = acc.total / h->scene->total_area;
 	return acc.total > 0 ? acc.change / acc.total : 0;
@@ -630,21 +571,35 @@ static double push_and_update(rad_hier *h, double *mean_B)
 
 static rad_status count_node(rad_solver *sv, void *ud, uint32_t t)
 {
-	rad_stats *s = ud;
 	const rad_hier *h = &sv->h;
-	int rc = node_is_cluster(t);
+	for (uint32_t id = *rad_node_links(&sv->h, t); id != RAD_NONE;
+	     id = rad_link_at(h, id)->next)
+		node_count_link(ud, rad_link_at(h, id));
+	return RAD_OK;
+}
+
+/*
+ * Study statistics of the exchanges just gathered (every stored link):
+ * the increment a link carries is F times the change of its source's B
+ * since the last gather (dB, pulled), all of B in the first iteration.
+ */
+static rad_status study_node(rad_solver *sv, void *ud, uint32_t t)
+{
+	const rad_hier *h = &sv->h;
+	int first = *(const int *)ud;
 	for (uint32_t id = *rad_node_links(&sv->h, t); id != RAD_NONE;
 	     id = rad_link_at(h, id)->next) {
 		const rad_link *l = rad_link_at(h, id);
-		s->links++;
-		if (node_is_light(l->src))
-			s->links_light++;
-		else if (rc && node_is_cluster(l->src))
-			s->links_cc++;
-		else if (rc || node_is_cluster(l->src))
-			s->links_sc++;
-		else
-			s->links_ss++;
+		double b = node_luma_B(h, l->src), inc = b;
+		if (!first && node_is_light(l->src))
+			inc = 0;
+		else if (!first)
+			inc = fabs(
+			        node_is_cluster(l->src)
+			                ? rad_luma(
+			                          rad_cluster_at(h, l->src)->dB)
+			                : rad_luma(rad_elem_at(h, l->src)->dB));
+		node_stat_exchange(sv, l->rcv, l->src, l->ff, b, inc);
 	}
 	return RAD_OK;
 }
@@ -710,6 +665,8 @@ static rad_status hr_step(rad_solver *sv, rad_error *err)
 	gather_clusters(h, 0);
 	rad_par_for(sv->par, sv->scene->npolys, 64, gather_roots, h);
 	rad_solver_progress(sv, 0.95);
+	int first = sv->stats.iteration == 0;
+	walk_all(sv, study_node, &first);
 	double r = push_and_update(h, &st->mean_B);
 	sv->stats.residual = r;
 	sv->stats.error_estimate = rad_error_estimate(st->prev_residual, r);

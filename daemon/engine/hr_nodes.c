@@ -375,3 +375,85 @@ double node_ff_bound(const rad_hier *h, uint32_t rcv, uint32_t src)
 	double f = as / (M_PI * d2);
 	return d2 > 0 && f < 1 ? f : 1;
 }
+
+double node_oracle(const rad_solver *sv, uint32_t rcv, uint32_t src, double b,
+                   double f)
+{
+	const rad_hier *h = &sv->h;
+	/* The isotropic model of a cluster can be off by its factor 1/4 either
+	 * way (a polygon facing the other end gets cos ~ 1, not 1/4): count
+	 * the transfer at its possible worst, so that the threshold bounds the
+	 * error rather than the model's own estimate of it. */
+	if (node_is_cluster(rcv))
+		f *= 4;
+	if (node_is_cluster(src))
+		f *= 4;
+	rad_oracle o = sv->opt.oracle;
+	if (node_is_light(src) && o == RAD_ORACLE_F)
+		o = RAD_ORACLE_BFA; /* a light's "form factor" is in lux/cd */
+	switch (o) {
+	case RAD_ORACLE_F:
+		return f;
+	case RAD_ORACLE_BF:
+		return b * f * h->scene->total_area / sv->flux_scale;
+	case RAD_ORACLE_BFA:
+	default:
+		return b * f * node_area_eff(h, rcv) / sv->flux_scale;
+	}
+}
+
+double node_area(const rad_hier *h, uint32_t t)
+{
+	if (node_is_light(t))
+		return 0;
+	if (node_is_cluster(t))
+		return rad_cluster_at(h, t)->area;
+	return rad_elem_at(h, t)->area;
+}
+
+void node_stat_exchange(rad_solver *sv, uint32_t r, uint32_t s, double ff,
+                        double b, double inc)
+{
+	rad_stats *S = &sv->stats;
+	/* What it carries: the oracle's BFA value without the clusters'
+	 * worst-case factor. */
+	double e = b * ff * node_area_eff(&sv->h, r) / sv->flux_scale;
+	S->links_gathered++;
+	if (4 * node_oracle(sv, r, s, inc, ff) > sv->opt.eps)
+		S->links_useful++;
+	int bin = RAD_EHIST_BINS - 1;
+	if (e > 0) {
+		double d = floor(-log10(e));
+		if (d < 0)
+			d = 0;
+		if (d < RAD_EHIST_BINS - 1)
+			bin = (int)d;
+	}
+	S->energy_hist[bin]++;
+}
+
+int node_split_side(const rad_hier *h, uint32_t r, uint32_t s, int rcv_only)
+{
+	if (r == s)
+		return 3;
+	int rs = node_splittable(h, r), ss = node_splittable(h, s);
+	if (rcv_only && rs)
+		return 1;
+	if (rs && ss)
+		return node_size(h, r) >= node_size(h, s) ? 1 : 2;
+	return rs ? 1 : 2;
+}
+
+void node_count_link(rad_stats *s, const rad_link *l)
+{
+	int rc = node_is_cluster(l->rcv);
+	s->links++;
+	if (node_is_light(l->src))
+		s->links_light++;
+	else if (rc && node_is_cluster(l->src))
+		s->links_cc++;
+	else if (rc || node_is_cluster(l->src))
+		s->links_sc++;
+	else
+		s->links_ss++;
+}

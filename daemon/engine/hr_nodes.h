@@ -60,4 +60,29 @@ double node_ff_estimate(const rad_hier *h, uint32_t rcv, uint32_t src);
 double node_ff(const rad_solver *sv, uint32_t rcv, uint32_t src, uint64_t *rays,
                double *spread);
 
+/*
+ * Oracle value of a transfer of form factor f from a source of photopic
+ * radiosity b (hr: B, rmb: the radiosity still to transmit), in units of
+ * eps (see rad_options.eps).  Cluster ends count at their worst (x4).
+ */
+double node_oracle(const rad_solver *sv, uint32_t rcv, uint32_t src, double b,
+                   double f);
+/*
+ * Study statistics of one exchange of form factor ff from src to rcv:
+ * counts it as gathered, as useful when its increment (photopic inc)
+ * would fail the oracle one level up, and in the energy histogram by
+ * what it carries (photopic radiosity b).  See rad_stats.
+ */
+void node_stat_exchange(rad_solver *sv, uint32_t r, uint32_t s, double ff,
+                        double b, double inc);
+/*
+ * Which end of a pair to refine: 1 the receiver, 2 the source, 3 both (a
+ * cluster's self-link).  The larger splittable end, or the receiver when
+ * rcv_only and it can split.
+ */
+int node_split_side(const rad_hier *h, uint32_t r, uint32_t s, int rcv_only);
+/* Count a stored link in s->links and its kind (links_ss ... light). */
+void node_count_link(rad_stats *s, const rad_link *l);
+/* Surface area of a node (0 for a light). */
+double node_area(const rad_hier *h, uint32_t t);
 #endif

@@ -24,6 +24,8 @@ void rad_mem_init(rad_mem *m)
 		atomic_init(&m->bytes[k], 0);
 	atomic_init(&m->total, 0);
 	atomic_init(&m->peak, 0);
+	atomic_init(&m->work, 0);
+	atomic_init(&m->peak_work, 0);
 }
 
 void rad_mem_report_clear(rad_mem_report *r)
@@ -41,6 +43,7 @@ void rad_mem_report_add(const rad_mem *m, rad_mem_report *r)
 	}
 	r->total += total;
 	r->peak_total += atomic_load(&m->peak);
+	r->peak_work += atomic_load(&m->peak_work);
 }
 
 void rad_mem_count(rad_mem *m, rad_mem_kind kind, int64_t delta)
@@ -49,6 +52,12 @@ void rad_mem_count(rad_mem *m, rad_mem_kind kind, int64_t delta)
 	int64_t t = atomic_fetch_add(&m->total, delta) + delta;
 	int64_t p = atomic_load(&m->peak);
 	while (t > p && !atomic_compare_exchange_weak(&m->peak, &p, t))
+		;
+	if (kind == RAD_MEM_STUDY)
+		return;
+	t = atomic_fetch_add(&m->work, delta) + delta;
+	p = atomic_load(&m->peak_work);
+	while (t > p && !atomic_compare_exchange_weak(&m->peak_work, &p, t))
 		;
 }
 
@@ -126,88 +135,100 @@ char *rad_mem_strdup(rad_mem *m, rad_mem_kind kind, const char *s)
 /* ------------------------------------------------------------ stable pool */
 
 void rad_pool_init(rad_pool *p, rad_mem *mem, rad_mem_kind kind,
-                   uint32_t rec_size, uint32_t base_shift)
+                   uint32_t rec_size, uint32_t shift, uint32_t first)
 {
 	memset(p, 0, sizeof(*p));
 	p->mem = mem;
 	p->kind = kind;
-	/* The free list threads a uint32_t through released records. */
+	/* The free lists thread a uint32_t through released records. */
 	p->rec_size = rec_size < sizeof(uint32_t) ? sizeof(uint32_t) : rec_size;
-	p->base_shift = base_shift;
-	p->free_head = RAD_NONE;
+	p->shift = shift;
+	uint32_t bs = 1u << shift;
+	p->first = first <= bs ? bs : (first + bs - 1) / bs * bs;
+	for (int n = 0; n <= RAD_POOL_RUNMAX; n++)
+		p->free_head[n] = RAD_NONE;
 }
 
 void rad_pool_destroy(rad_pool *p)
 {
 	for (uint32_t k = 0; k < p->nblocks; k++)
 		rad_mem_free(p->mem, p->kind, p->block[k]);
-	rad_pool_init(p, p->mem, p->kind, p->rec_size, p->base_shift);
+	rad_mem_free(p->mem, p->kind, p->block);
+	rad_pool_init(p, p->mem, p->kind, p->rec_size, p->shift, p->first);
 }
 
 uint32_t rad_pool_capacity(const rad_pool *p)
 {
 	if (p->nblocks == 0)
 		return 0;
-	return ((1u << p->nblocks) - 1u) << p->base_shift;
+	return p->first + ((p->nblocks - 1) << p->shift);
+}
+
+/* Make sure the block holding record id exists. */
+static int pool_reserve(rad_pool *p, uint32_t id)
+{
+	while (rad_pool_capacity(p) <= id) {
+		if (p->nblocks == p->cap_blocks) {
+			uint32_t cap = p->cap_blocks ? 2 * p->cap_blocks : 8;
+			unsigned char **t = rad_mem_realloc(
+			        p->mem, p->kind, p->block, cap * sizeof(*t));
+			if (!t)
+				return 0;
+			p->block = t;
+			p->cap_blocks = cap;
+		}
+		size_t recs = p->nblocks ? 1u << p->shift : p->first;
+		unsigned char *b =
+		        rad_mem_alloc(p->mem, p->kind, recs * p->rec_size);
+		if (!b)
+			return 0;
+		p->block[p->nblocks++] = b;
+	}
+	return 1;
 }
 
 uint32_t rad_pool_add(rad_pool *p, uint32_t n)
 {
-	if (n == 1 && p->free_head != RAD_NONE) {
-		uint32_t id = p->free_head;
-		void *rec = rad_pool_at(p, id);
-		memcpy(&p->free_head, rec, sizeof(uint32_t));
-		memset(rec, 0, p->rec_size);
-		p->nfree--;
-		return id;
-	}
 	if (n == 0)
 		return RAD_NONE;
+	if (n <= RAD_POOL_RUNMAX && p->free_head[n] != RAD_NONE) {
+		uint32_t id = p->free_head[n];
+		void *rec = rad_pool_at(p, id);
+		memcpy(&p->free_head[n], rec, sizeof(uint32_t));
+		memset(rec, 0, (size_t)n * p->rec_size);
+		p->nfree -= n;
+		return id;
+	}
 	/* A run must not straddle two blocks: skip to the next block if
-	 * needed (the skipped records go to the free list). */
+	 * needed (the skipped records become free singles). */
 	uint32_t id = p->count;
-	for (;;) {
-		if ((uint64_t)id + n > RAD_NONE - 1u)
+	uint32_t end =
+	        id < p->first ? p->first
+	                      : p->first + (((id - p->first) >> p->shift) + 1) *
+	                                           (1u << p->shift);
+	if (id + n > end) {
+		if (n > (1u << p->shift))
 			return RAD_NONE;
-		uint32_t q = (id >> p->base_shift) + 1;
-		uint32_t k = 31u - (uint32_t)__builtin_clz(q);
-		uint32_t first = ((1u << k) - 1u) << p->base_shift;
-		uint32_t size = 1u << (p->base_shift + k);
-		if (n > size && k + 1 < RAD_POOL_MAXBLOCKS) {
-			id = first + size; /* too small: try the next block */
-			continue;
-		}
-		if (id + n > first + size) {
-			id = first + size;
-			continue;
-		}
-		while (p->nblocks <= k) {
-			size_t bytes = (size_t)p->rec_size
-			               << (p->base_shift + p->nblocks);
-			unsigned char *b =
-			        rad_mem_alloc(p->mem, p->kind, bytes);
-			if (!b)
-				return RAD_NONE;
-			p->block[p->nblocks++] = b;
-		}
-		break;
+		id = end;
 	}
-	/* Records skipped to keep the run in one block become free. */
-	for (uint32_t s = p->count; s < id; s++) {
-		void *rec = rad_pool_at(p, s);
-		memcpy(rec, &p->free_head, sizeof(uint32_t));
-		p->free_head = s;
-		p->nfree++;
-	}
+	if ((uint64_t)id + n >= RAD_NONE || !pool_reserve(p, id + n - 1))
+		return RAD_NONE;
+	for (uint32_t s = p->count; s < id; s++)
+		rad_pool_release_run(p, s, 1);
 	memset(rad_pool_at(p, id), 0, (size_t)n * p->rec_size);
 	p->count = id + n;
 	return id;
 }
 
-void rad_pool_release(rad_pool *p, uint32_t id)
+void rad_pool_release_run(rad_pool *p, uint32_t id, uint32_t n)
 {
+	if (n > RAD_POOL_RUNMAX) {
+		for (uint32_t k = 0; k < n; k++)
+			rad_pool_release_run(p, id + k, 1);
+		return;
+	}
 	void *rec = rad_pool_at(p, id);
-	memcpy(rec, &p->free_head, sizeof(uint32_t));
-	p->free_head = id;
-	p->nfree++;
+	memcpy(rec, &p->free_head[n], sizeof(uint32_t));
+	p->free_head[n] = id;
+	p->nfree += n;
 }

@@ -13,9 +13,9 @@
  * counter set.
  *
  * rad_pool is an array of fixed-size records addressed by 32-bit ids whose
- * records never move: storage is a list of blocks, block k holding
- * base << k records, so a pointer or id taken once stays valid while the
- * pool grows, and a reader on another thread never sees a reallocation.
+ * records never move: storage is a table of fixed-size blocks, so a pointer
+ * or id taken once stays valid while the pool grows.  Only the block table
+ * is reallocated, and only while the pool grows.
  * Growing (rad_pool_add) is not thread-safe; the engine grows pools from
  * one thread only (see the DESIGN note in hr.c).
  */
@@ -32,6 +32,8 @@ typedef struct rad_mem {
 	_Atomic int64_t bytes[RAD_MEM_NKINDS]; /* current bytes held by kind */
 	_Atomic int64_t total;                 /* sum of bytes[] */
 	_Atomic int64_t peak;                  /* high-water mark of total */
+	_Atomic int64_t work;                  /* total minus RAD_MEM_STUDY */
+	_Atomic int64_t peak_work;             /* its high-water mark */
 } rad_mem;
 
 /*
@@ -59,33 +61,47 @@ char *rad_mem_strdup(rad_mem *m, rad_mem_kind kind, const char *s);
 
 /* ------------------------------------------------------------ stable pool */
 
-#define RAD_POOL_MAXBLOCKS 32
 #define RAD_NONE UINT32_MAX /* the null id */
+#define RAD_POOL_RUNMAX 16  /* longest run with a free list of its own */
 
 typedef struct rad_pool {
 	rad_mem *mem;
 	rad_mem_kind kind;
-	uint32_t rec_size;   /* bytes per record */
-	uint32_t base_shift; /* block k holds 1 << (base_shift + k) records */
-	uint32_t count;      /* records handed out: ids 0 .. count-1 */
-	uint32_t nblocks;    /* blocks allocated */
-	uint32_t free_head;  /* head of the free list of released records */
-	uint32_t nfree;      /* records on the free list */
-	unsigned char *block[RAD_POOL_MAXBLOCKS];
+	uint32_t rec_size; /* bytes per record */
+	uint32_t shift;    /* blocks after the first hold 1 << shift records */
+	uint32_t first;    /* records in block 0 (>= 1 << shift) */
+	uint32_t count;    /* records handed out: ids 0 .. count-1 */
+	uint32_t nblocks;  /* blocks allocated */
+	uint32_t cap_blocks;
+	unsigned char **block; /* the block table, counted under kind */
+	/* Released runs, one list per length (index 1 = single records). */
+	uint32_t free_head[RAD_POOL_RUNMAX + 1];
+	uint32_t nfree; /* records on the free lists */
 } rad_pool;
 
+/*
+ * Block 0 holds `first` records (rounded up to a whole block), so that a
+ * long initial run -- the polygon roots -- fits in it; every later block
+ * holds 1 << shift.  Capacity therefore exceeds use by less than one block
+ * plus the released records.
+ */
 void rad_pool_init(rad_pool *p, rad_mem *mem, rad_mem_kind kind,
-                   uint32_t rec_size, uint32_t base_shift);
+                   uint32_t rec_size, uint32_t shift, uint32_t first);
 void rad_pool_destroy(rad_pool *p);
 
 /*
  * Hand out n consecutive records, zero-filled; returns the first id or
- * RAD_NONE when out of memory.  n > 1 never reuses freed records, so runs
- * (siblings stored together) stay consecutive.
+ * RAD_NONE when out of memory (or when n exceeds a block).  A run of
+ * n <= RAD_POOL_RUNMAX reuses a released run of the same length first, so
+ * a solver that frees and remakes sibling runs does not grow the pool.
  */
 uint32_t rad_pool_add(rad_pool *p, uint32_t n);
-/* Release one record to the free list (reused by later rad_pool_add(1)). */
-void rad_pool_release(rad_pool *p, uint32_t id);
+/* Release a run of n records made by rad_pool_add(p, n) (or n singles). */
+void rad_pool_release_run(rad_pool *p, uint32_t id, uint32_t n);
+static inline void rad_pool_release(rad_pool *p, uint32_t id)
+{
+	rad_pool_release_run(p, id, 1);
+}
 
 /* Records handed out and still live. */
 static inline uint32_t rad_pool_live(const rad_pool *p)
@@ -95,11 +111,11 @@ static inline uint32_t rad_pool_live(const rad_pool *p)
 
 static inline void *rad_pool_at(const rad_pool *p, uint32_t id)
 {
-	/* Block k starts at id (2^k - 1) << base_shift. */
-	uint32_t q = (id >> p->base_shift) + 1;
-	uint32_t k = 31u - (uint32_t)__builtin_clz(q);
-	uint32_t first = ((1u << k) - 1u) << p->base_shift;
-	return p->block[k] + (size_t)(id - first) * p->rec_size;
+	if (id < p->first)
+		return p->block[0] + (size_t)id * p->rec_size;
+	id -= p->first;
+	return p->block[1 + (id >> p->shift)] +
+	       (size_t)(id & ((1u << p->shift) - 1u)) * p->rec_size;
 }
 
 /* Capacity in records of the blocks allocated so far. */

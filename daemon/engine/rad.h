@@ -72,7 +72,8 @@ const char *rad_status_name(rad_status st);
 	X(ELEM_CLUSTER, "elements_cluster") /* volume clusters */              \
 	X(LINKS, "links")     /* link pool (active and passive) */             \
 	X(MATRIX, "matrix")   /* the matrix solver's form factors */           \
-	X(SCRATCH, "scratch") /* per-iteration work buffers */
+	X(SCRATCH, "scratch") /* per-iteration work buffers */                 \
+	X(STUDY, "study")     /* study statistics (rad_options.study) */
 
 typedef enum rad_mem_kind {
 #define RAD_MEM_ENUM_(name, str) RAD_MEM_##name,
@@ -85,6 +86,8 @@ typedef struct rad_mem_report {
 	int64_t bytes[RAD_MEM_NKINDS]; /* current bytes by kind */
 	int64_t total;                 /* sum of bytes[] */
 	int64_t peak_total;            /* high-water mark of total */
+	int64_t peak_work; /* high-water mark of total minus study: what a
+	                      solve without study statistics needs */
 } rad_mem_report;
 
 /* JSON-friendly name of a kind ("geometry", "links"...). */
@@ -171,6 +174,8 @@ typedef enum rad_solver_kind {
 	RAD_SOLVER_MATRIX = 0,  /* full form-factor matrix, Gauss-Seidel */
 	RAD_SOLVER_PROGRESSIVE, /* shooting with adaptive subdivision */
 	RAD_SOLVER_HR,          /* hierarchical radiosity (+ clustering) */
+	RAD_SOLVER_RMB, /* reduced-memory HR: radiosity to transmit, link
+	                   hierarchy, RefineAndGather (ALGORITHM.md §4) */
 	RAD_SOLVER_NKINDS
 } rad_solver_kind;
 
@@ -179,6 +184,17 @@ typedef enum rad_oracle {
 	RAD_ORACLE_F,       /* form factor alone */
 	RAD_ORACLE_BF,      /* emitter radiosity x form factor */
 } rad_oracle;
+
+/* rmb: which links RefineAndGather keeps (ALGORITHM.md §4, criterion). */
+typedef enum rad_store {
+	/* The report's rule: keep every link except those from or to a pure
+	 * source (reflectance 0), whose transfer never changes again. */
+	RAD_STORE_MINIMAL = 0,
+	/* Also drop the children of a link whose next increment (this one
+	 * times the source's reflectance) will pass the oracle at the
+	 * link's own level: a coarser level will do next time. */
+	RAD_STORE_ANTICIPATE,
+} rad_store;
 
 typedef struct rad_options {
 	rad_solver_kind solver;
@@ -193,7 +209,8 @@ typedef struct rad_options {
 	 * Receiver accuracy: a link is pushed to smaller receivers while the
 	 * irradiance it brings varies over its receiver by more than this
 	 * fraction of the scene's mean radiosity.  Smaller is more accurate
-	 * near corners and shadow edges, and finer.  hr only.
+	 * near corners and shadow edges, and finer.  hr and rmb (rmb applies
+	 * it to each iteration's increment).
 	 */
 	double variation;
 	/* Smallest element, as a fraction of the scene's bounding-box
@@ -202,7 +219,11 @@ typedef struct rad_options {
 	/* Matrix solver (and progressive's starting mesh): element edge,
 	 * as a fraction of the bounding-box diagonal. */
 	double mesh_edge_rel;
-	int clustering;  /* hr: volume clusters on (default 1) */
+	int clustering;  /* hr, rmb: volume clusters on (default 1) */
+	rad_store store; /* rmb: link creation criterion */
+	/* Study statistics (re-created links): costs memory, counted as
+	 * "study" and left out of mem.peak_work.  Off by default. */
+	int study;
 	int threads;     /* worker threads; 0 = number of cores */
 	int rcv_samples; /* receiver points per form factor (1..16) */
 	int vis_samples; /* shadow rays per receiver point (1..16) */
@@ -215,9 +236,11 @@ typedef struct rad_options {
 } rad_options;
 
 void rad_options_default(rad_options *o);
-/* Parse "matrix" / "progressive" / "hr"; returns RAD_ERR_INVALID if unknown. */
+/* Parse "matrix" / "progressive" / "hr" / "rmb"; RAD_ERR_INVALID if unknown. */
 rad_status rad_solver_kind_parse(const char *name, rad_solver_kind *out);
 const char *rad_solver_kind_name(rad_solver_kind k);
+
+#define RAD_EHIST_BINS 16
 
 typedef struct rad_stats {
 	uint32_t iteration;     /* iterations done so far */
@@ -230,9 +253,23 @@ typedef struct rad_stats {
 	uint64_t links_light;   /* from point/spot/directional lights */
 	uint64_t links_active;  /* active (leaf) links */
 	uint64_t links_passive; /* passive links (hierarchy kept) */
-	uint64_t links_created; /* this iteration */
-	uint64_t links_deleted; /* this iteration */
-	uint64_t elements;      /* surface elements */
+	uint64_t links_created; /* stored this iteration */
+	uint64_t links_deleted; /* stored before, removed this iteration */
+	/* Of links_created, pairs deleted in an earlier iteration (counted
+	 * only with rad_options.study, else 0). */
+	uint64_t links_recreated;
+	uint64_t links_gathered;  /* exchanges carried this iteration */
+	uint64_t links_transient; /* of those, by links never stored */
+	/* Of links_gathered, those whose increment (this iteration's
+	 * transfer minus the last one's) would fail the oracle one level up
+	 * (4 x its oracle value > eps): the links the exchange needs at
+	 * their level, the report's "useful" links (§3.2.4). */
+	uint64_t links_useful;
+	/* Exchanges by energy carried (the oracle's BFA value: flux as a
+	 * fraction of the total source flux): bin k counts values in
+	 * [10^-(k+1), 10^-k); the last bin everything smaller, zero too. */
+	uint64_t energy_hist[RAD_EHIST_BINS];
+	uint64_t elements; /* surface elements */
 	uint64_t clusters;
 	uint64_t leaves;       /* surface leaves (the mesh) */
 	uint64_t refinements;  /* element splits this iteration */

@@ -1,7 +1,7 @@
 /*
  * solver.c -- what all solvers share: options, creation, stepping, timing,
  * statistics and memory reports.  The solvers themselves (matrix.c,
- * progressive.c, hr.c) only implement the ops table of solver.h.
+ * progressive.c, hr.c, rmb.c) only implement the ops table of solver.h.
  */
 #include "solver.h"
 
@@ -16,6 +16,7 @@ static const rad_solver_ops *const solver_table[RAD_SOLVER_NKINDS] = {
         [RAD_SOLVER_MATRIX] = &rad_solver_matrix_ops,
         [RAD_SOLVER_PROGRESSIVE] = &rad_solver_progressive_ops,
         [RAD_SOLVER_HR] = &rad_solver_hr_ops,
+        [RAD_SOLVER_RMB] = &rad_solver_rmb_ops,
 };
 
 void rad_options_default(rad_options *o)
@@ -71,6 +72,10 @@ static rad_status check_options(const rad_options *o, rad_error *err)
 	if ((unsigned)o->oracle > RAD_ORACLE_BF)
 		return rad_fail(err, RAD_ERR_INVALID, "unknown oracle %d",
 		                (int)o->oracle);
+	if ((unsigned)o->store > RAD_STORE_ANTICIPATE)
+		return rad_fail(err, RAD_ERR_INVALID,
+		                "unknown link creation criterion %d",
+		                (int)o->store);
 	if (!(o->eps > 0) || !isfinite(o->eps))
 		return rad_fail(err, RAD_ERR_INVALID,
 		                "eps must be a finite number > 0 (got %g)",
@@ -152,6 +157,9 @@ rad_status rad_solver_step(rad_solver *sv, rad_error *err)
 	double t0 = now_seconds();
 	uint64_t splits0 = sv->h.splits;
 	sv->stats.links_created = sv->stats.links_deleted = 0;
+	sv->stats.links_recreated = sv->stats.links_gathered = 0;
+	sv->stats.links_transient = sv->stats.links_useful = 0;
+	memset(sv->stats.energy_hist, 0, sizeof(sv->stats.energy_hist));
 	sv->stats.rays = 0;
 	rad_status st = sv->ops->step(sv, err);
 	if (st)

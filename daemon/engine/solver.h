@@ -1,7 +1,7 @@
 /*
  * solver.h -- what every solver shares: the hierarchy, counters, the
  * thread pool, options and published statistics; and the table of solver
- * implementations (matrix.c, progressive.c, hr.c).
+ * implementations (matrix.c, progressive.c, hr.c, rmb.c).
  */
 #ifndef LUXRAD_SOLVER_H
 #define LUXRAD_SOLVER_H
@@ -37,6 +37,7 @@ struct rad_solver {
 extern const rad_solver_ops rad_solver_matrix_ops;
 extern const rad_solver_ops rad_solver_progressive_ops;
 extern const rad_solver_ops rad_solver_hr_ops;
+extern const rad_solver_ops rad_solver_rmb_ops;
 
 /* 1 if the caller's cancel flag is raised. */
 static inline int rad_solver_cancelled(const rad_solver *sv)

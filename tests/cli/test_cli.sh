@@ -152,8 +152,9 @@ for v in lux:
 assert d["iterations"] == niter, d["iterations"]
 assert d["solver"] == "hr", d["solver"]
 mem = d["memory_bytes"]
-parts = sum(v for k, v in mem.items() if k != "total")
+parts = sum(v for k, v in mem.items() if not k.startswith(("total", "peak")))
 assert mem["total"] == parts > 0, mem
+assert mem["peak_total"] >= mem["peak_work"] >= mem["total"], mem
 it = d["per_iteration"]
 assert len(it) == niter, len(it)
 for k in ["iteration", "seconds", "links", "links_ss", "links_sc",

@@ -63,7 +63,7 @@ static void test_pool_records_stay_put(void **state)
 	rad_mem m;
 	rad_mem_init(&m);
 	rad_pool p;
-	rad_pool_init(&p, &m, RAD_MEM_ELEM_SURFACE, 24, 4);
+	rad_pool_init(&p, &m, RAD_MEM_ELEM_SURFACE, 24, 4, 0);
 	uint32_t first = rad_pool_add(&p, 1);
 	uint32_t *rec = rad_pool_at(&p, first);
 	*rec = 0xdeadbeef;
@@ -84,6 +84,11 @@ static void test_pool_records_stay_put(void **state)
 	uint32_t again = rad_pool_add(&p, 1);
 	assert_int_equal(again, first);
 	assert_int_equal(*(uint32_t *)rad_pool_at(&p, again), 0);
+	/* A released run is reused by the next run of its length. */
+	uint32_t run = rad_pool_add(&p, 4), count = p.count;
+	rad_pool_release_run(&p, run, 4);
+	assert_int_equal(rad_pool_add(&p, 4), run);
+	assert_int_equal(p.count, count);
 	rad_mem_report r;
 	rad_mem_report_clear(&r);
 	rad_mem_report_add(&m, &r);

@@ -1,0 +1,979 @@
+/*
+ * rmb.c -- reduced-memory hierarchical radiosity: radiosity to transmit,
+ * the link hierarchy and RefineAndGather (ALGORITHM.md §4, the report's
+ * RMbright).
+ *
+ * Every node carries dB, the radiosity it still has to transmit.  At the
+ * start dB = B = E (pulled up the trees); each iteration gathers
+ * I = sum F dB over the links, pushes I down, sets dB = rho I and B += dB
+ * on the leaves and pulls both up.  A light transmits in the first
+ * iteration only.  The result equals classic HR for the same links (§4.2.2);
+ * the oracle is applied to dB, so links coarsen as the increments shrink.
+ *
+ * DESIGN
+ * The link hierarchy.  A link that was refined stays in memory as a
+ * passive link whose children -- the links its refinement made -- are one
+ * run of consecutive records (child, nchild; RAD_LINK_SPLIT_SRC says which
+ * end was split).  Active links are the leaves of these trees; the roots
+ * are listed in st->roots (with clustering: the root cluster's self-link).
+ * Receivers keep no link lists: the walk over the link trees is the
+ * gather.
+ *
+ * RefineAndGather, in waves.  The recursive walk of fig. 4.2 is done
+ * breadth-first so that it is parallel and deterministic, like hr.c: a
+ * wave is a list of items (receiver, source, record); the worker threads
+ * judge each item (oracle on dB with the stored form factor, or on an
+ * estimate for a new pair; shadow rays for a new pair at its level) into
+ * the item's own slot; one thread then applies the wave in order: an item
+ * at its level adds F dB to its receiver, an item to refine sends its
+ * children to the next wave -- the stored ones of a passive link, or new
+ * ones (elements split on demand, by this thread only).
+ *
+ * What happens "on return" in fig. 4.2 -- form factors from the children,
+ * which links to keep -- needs the children's results, so it is a second,
+ * post-order pass over the trees once the waves are done (post()).  New
+ * children are therefore made as records at once (tentative links) when
+ * their parent is a record and they could be kept; under a link whose
+ * source is a pure source (reflectance 0, so dB is zero after the first
+ * iteration) nothing can ever be kept, and the pairs below it are walked
+ * as transient items that exist only in the wave (such a link weighs
+ * nothing in its parent's recursive form factor: see child_weight()).
+ * This keeps the memory of iteration 1 -- where most transfers come from
+ * the sources -- close to what is finally stored.
+ *
+ * Keeping (the creation criterion, §4.3.1): a link is kept when its source
+ * and its receiver both reflect (RAD_STORE_MINIMAL, the report's rule).
+ * RAD_STORE_ANTICIPATE also refuses to keep the children of a link whose
+ * next increment -- this one times the source's largest reflectance --
+ * will pass the oracle at the link's own level: they are used now and
+ * dropped, and the link stays active with their recursive form factor.
+ * A passive link with at least one child kept keeps its run (compacted
+ * in place to the kept children); one with none becomes active again.  A
+ * passive link found at its level deletes its whole subtree (§4.3.2).
+ *
+ * Recursive form factors (§4.3.4): every passive link's form factor is
+ * rebuilt from its children after each walk, F = sum of w_c F_c
+ * (child_weight()), which is exact for uniform radiosity over the
+ * reflecting polygons and, for a cluster's self-link, gives the true
+ * self-transfer (zero for convex contents) instead of the isotropic guess.
+ */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "err.h"
+#include "hr_nodes.h"
+#include "solver.h"
+
+/* What judging an item decided. */
+enum { ACT_DROP = 0, ACT_LEVEL, ACT_SPLIT, ACT_SPLIT_RCV };
+
+/* rmb's own link flags, beside RAD_LINK_PASSIVE and RAD_LINK_SPLIT_SRC. */
+enum {
+	L_NEW = 1u << 4,   /* made this iteration: no form factor yet */
+	L_DEAD = 1u << 5,  /* carries nothing: remove */
+	L_PRUNE = 1u << 6, /* passive link used at its level: drop subtree */
+};
+
+typedef struct rmb_item {
+	uint32_t rcv, src;
+	uint32_t link; /* its record, or RAD_NONE for a transient pair */
+} rmb_item;
+
+typedef struct rmb_eval {
+	float ff, spread;
+	uint8_t action;
+} rmb_eval;
+
+typedef struct rmb_vec { /* growable array of items, SCRATCH */
+	rmb_item *v;
+	size_t n, cap;
+} rmb_vec;
+
+/* Open-addressing set of 64-bit pair keys (study statistics, STUDY). */
+typedef struct rmb_set {
+	uint64_t *keys; /* 0 = empty slot; keys are stored + 1 */
+	size_t n, cap;
+} rmb_set;
+
+typedef struct rmb_state {
+	rmb_vec cand, next; /* this wave, the next one */
+	rmb_eval *eval;
+	size_t eval_cap;
+	uint64_t *rays; /* per-thread ray counters */
+	uint32_t *roots;
+	size_t nroots, cap_roots; /* stored root links, LINKS */
+	uint8_t *black;           /* per cluster id: contents all rho = 0 */
+	float *arefl;             /* per cluster id: area that reflects */
+	uint32_t ncl;
+	uint32_t iter;   /* iterations done */
+	int force_store; /* cancelled: keep pairs at their level */
+	double mean_dB;  /* area-mean photopic dB after the last update */
+	double prev_residual;
+	rmb_set deleted; /* study: pairs deleted so far */
+} rmb_state;
+
+/* Pairs of polygons handed to one walk without clustering. */
+#define RMB_BLOCK_PAIRS (1u << 20)
+
+/* ------------------------------------------------------------- helpers */
+
+static rad_status vec_push(rad_solver *sv, rmb_vec *v, rmb_item it)
+{
+	if (v->n == v->cap) {
+		size_t cap = v->cap ? 2 * v->cap : 1024;
+		rmb_item *p = rad_mem_realloc(&sv->mem, RAD_MEM_SCRATCH, v->v,
+		                              cap * sizeof(*p));
+		if (!p)
+			return RAD_ERR_NOMEM;
+		v->v = p;
+		v->cap = cap;
+	}
+	v->v[v->n++] = it;
+	return RAD_OK;
+}
+
+static void vec_free(rad_solver *sv, rmb_vec *v)
+{
+	rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, v->v);
+	memset(v, 0, sizeof(*v));
+}
+
+static uint64_t pair_key(uint32_t r, uint32_t s)
+{
+	return ((uint64_t)r << 32 | s) + 1;
+}
+
+static size_t set_slot(const rmb_set *s, uint64_t k)
+{
+	uint64_t x = k * 0x9E3779B97F4A7C15ull;
+	size_t i = (size_t)(x >> 17) & (s->cap - 1);
+	while (s->keys[i] && s->keys[i] != k)
+		i = (i + 1) & (s->cap - 1);
+	return i;
+}
+
+static int set_has(const rmb_set *s, uint64_t k)
+{
+	return s->cap && s->keys[set_slot(s, k)] == k;
+}
+
+static rad_status set_add(rad_solver *sv, rmb_set *s, uint64_t k)
+{
+	if (2 * (s->n + 1) > s->cap) {
+		rmb_set g = {NULL, 0, s->cap ? 2 * s->cap : 1024};
+		g.keys = rad_mem_calloc(&sv->mem, RAD_MEM_STUDY, g.cap,
+		                        sizeof(uint64_t));
+		if (!g.keys)
+			return RAD_ERR_NOMEM;
+		for (size_t i = 0; i < s->cap; i++)
+			if (s->keys[i])
+				g.keys[set_slot(&g, s->keys[i])] = s->keys[i];
+		g.n = s->n;
+		rad_mem_free(&sv->mem, RAD_MEM_STUDY, s->keys);
+		*s = g;
+	}
+	size_t i = set_slot(s, k);
+	if (!s->keys[i]) {
+		s->keys[i] = k;
+		s->n++;
+	}
+	return RAD_OK;
+}
+
+/* 1 if no polygon of the node reflects (a pure source, or black). */
+static int node_black(const rad_solver *sv, uint32_t t)
+{
+	const rmb_state *st = sv->impl;
+	if (node_is_light(t))
+		return 1;
+	if (node_is_cluster(t))
+		return st->black[node_index(t)];
+	const rad_elem *e = rad_elem_at(&sv->h, t);
+	const float *rho = rad_elem_mat(&sv->h, e)->rho;
+	return rho[0] == 0 && rho[1] == 0 && rho[2] == 0;
+}
+
+/* Area of the node's polygons that reflect (rho > 0). */
+static double node_arefl(const rad_solver *sv, uint32_t t)
+{
+	const rmb_state *st = sv->impl;
+	if (node_is_cluster(t))
+		return st->arefl[node_index(t)];
+	return node_black(sv, t) ? 0 : node_area(&sv->h, t);
+}
+
+/* Fill black[] and arefl[] for cluster id and below. */
+static double mark_black(rad_solver *sv, uint32_t id)
+{
+	rmb_state *st = sv->impl;
+	const rad_cluster *c = rad_cluster_at(&sv->h, id);
+	double a = 0;
+	if (c->child != RAD_NONE) {
+		a += mark_black(sv, c->child);
+		a += mark_black(sv, c->child + 1);
+	} else {
+		for (uint32_t j = c->first; j < c->first + c->count; j++)
+			a += node_arefl(sv, sv->h.order[j]);
+	}
+	st->arefl[id] = (float)a;
+	st->black[id] = a == 0;
+	return a;
+}
+
+/*
+ * Weight of child link c in its parent p's recursive form factor
+ * (ALGORITHM.md §4.3.4: F_p = sum of weight x F_c).  After the first
+ * iteration only reflecting polygons transmit or use what they receive,
+ * so both averages run over reflecting area: a split receiver gives the
+ * mean over its reflecting children (times 4 from a cluster to a polygon,
+ * whose share of a cluster's irradiance is 1/4); a split source, the sum
+ * over its children scaled by their reflecting fractions, so that F_p
+ * times the source's area-mean dB is exact when dB is uniform over the
+ * reflecting part (sources inside a cluster keep dB = 0).
+ */
+static double child_weight(const rad_solver *sv, const rad_link *p,
+                           const rad_link *c)
+{
+	const rad_hier *h = &sv->h;
+	double w = 1;
+	if (c->rcv != p->rcv) {
+		double a = node_arefl(sv, p->rcv);
+		w *= a > 0 ? node_arefl(sv, c->rcv) / a : 0;
+		if (node_is_cluster(p->rcv) && !node_is_cluster(c->rcv))
+			w *= 4;
+	}
+	if (c->src != p->src) {
+		double fp = node_arefl(sv, p->src) / node_area(h, p->src);
+		double fc = node_arefl(sv, c->src) / node_area(h, c->src);
+		w *= fp > 0 ? fc / fp : 0;
+	}
+	return w;
+}
+
+/* Radiosity the node still has to transmit (a light: first iteration). */
+static void node_dB(const rad_solver *sv, uint32_t t, double out[3])
+{
+	const rmb_state *st = sv->impl;
+	const float *d;
+	if (node_is_light(t)) {
+		for (int c = 0; c < 3; c++)
+			out[c] = st->iter == 0
+			                 ? sv->scene->lights[node_index(t)]
+			                           .intensity[c]
+			                 : 0;
+		return;
+	}
+	d = node_is_cluster(t) ? rad_cluster_at(&sv->h, t)->dB
+	                       : rad_elem_at(&sv->h, t)->dB;
+	for (int c = 0; c < 3; c++)
+		out[c] = d[c];
+}
+
+static double luma3(const double c[3])
+{
+	return RAD_LUMA_R * c[0] + RAD_LUMA_G * c[1] + RAD_LUMA_B * c[2];
+}
+
+/* Increments are signed only by rounding: judge their magnitude. */
+static double node_luma_dB(const rad_solver *sv, uint32_t t)
+{
+	double d[3];
+	node_dB(sv, t, d);
+	return fabs(luma3(d));
+}
+
+/* Largest reflectance inside a node (over channels), for anticipation. */
+static double node_rho_max(const rad_solver *sv, uint32_t t)
+{
+	const rad_hier *h = &sv->h;
+	if (node_is_light(t))
+		return 0;
+	if (node_is_cluster(t))
+		return 1; /* mixed contents: assume the worst */
+	const float *rho = rad_elem_mat(h, rad_elem_at(h, t))->rho;
+	return fmax(rho[0], fmax(rho[1], rho[2]));
+}
+
+static double spread_limit(const rad_solver *sv)
+{
+	const rmb_state *st = sv->impl;
+	double ref = st->iter == 0 ? sv->flux_scale / sv->scene->total_area
+	                           : st->mean_dB;
+	return sv->opt.variation * ref;
+}
+
+static int pair_refinable(const rad_hier *h, uint32_t r, uint32_t s)
+{
+	return node_splittable(h, r) || node_splittable(h, s);
+}
+
+/* ------------------------------------------------------------- judging */
+
+/*
+ * Judge one item: ACT_LEVEL with its form factor when the link may carry
+ * its transfer at this level, ACT_SPLIT(_RCV) to refine, ACT_DROP when
+ * nothing passes.  Pure computation: runs on the worker threads.
+ */
+static uint8_t evaluate(rad_solver *sv, const rmb_item *it, float *ff,
+                        float *spread, uint64_t *rays)
+{
+	const rad_hier *h = &sv->h;
+	const rmb_state *st = sv->impl;
+	uint32_t r = it->rcv, s = it->src;
+	const rad_link *l =
+	        it->link != RAD_NONE ? rad_link_at(h, it->link) : NULL;
+	int fresh = !l || (l->flags & L_NEW);
+	int passive = l && !fresh && l->child != RAD_NONE;
+	int may_split = !st->force_store;
+	double b = node_luma_dB(sv, s);
+	*ff = *spread = 0;
+	if (passive && !may_split)
+		return ACT_SPLIT; /* cancelled: walk what exists, make nothing
+		                   */
+	if (r == s) { /* a cluster's self-link: opened up while it emits */
+		if (!node_is_cluster(r))
+			return ACT_DROP;
+		if (b > 0 && may_split)
+			return ACT_SPLIT;
+		*ff = fresh ? 0 : l->ff;
+		return ACT_LEVEL;
+	}
+	if (node_black(sv, r) || !node_facing(h, r, s))
+		return ACT_DROP;
+	double f = !fresh ? (l->ff > 0 ? l->ff : node_ff_bound(h, r, s))
+	                  : node_ff_estimate(h, r, s);
+	if (may_split && pair_refinable(h, r, s) &&
+	    node_oracle(sv, r, s, b, f) > sv->opt.eps)
+		return ACT_SPLIT;
+	int rcv_split = may_split && node_splittable(h, r);
+	if (!fresh) {
+		if (rcv_split && 0.5 * b * l->spread > spread_limit(sv))
+			return ACT_SPLIT_RCV;
+		*ff = l->ff;
+		*spread = l->spread;
+		return ACT_LEVEL;
+	}
+	/* A pair that cannot be kept and carries nothing needs no rays. */
+	if (b == 0 && (node_black(sv, s) || !l))
+		return ACT_LEVEL;
+	double sp = 0;
+	f = node_ff(sv, r, s, rays, &sp);
+	if (rcv_split && 0.5 * b * sp > spread_limit(sv))
+		return ACT_SPLIT_RCV;
+	/* As in hr.c: cluster samples seeing nothing prove nothing; keep a
+	 * zero link, judged on the box-gap bound, unless it fails now. */
+	if (!(f > 0) && (node_is_cluster(r) || node_is_cluster(s))) {
+		if (may_split &&
+		    node_oracle(sv, r, s, b, node_ff_bound(h, r, s)) >
+		            sv->opt.eps)
+			return ACT_SPLIT;
+		return ACT_LEVEL;
+	}
+	*ff = (float)f;
+	*spread = (float)sp;
+	return f > 0 ? ACT_LEVEL : ACT_DROP;
+}
+
+typedef struct eval_job {
+	rad_solver *sv;
+	rmb_state *st;
+} eval_job;
+
+static void eval_range(void *ud, size_t b, size_t e, int thread)
+{
+	eval_job *j = ud;
+	for (size_t i = b; i < e; i++) {
+		rmb_eval *out = &j->st->eval[i];
+		out->action = evaluate(j->sv, &j->st->cand.v[i], &out->ff,
+		                       &out->spread, &j->st->rays[thread]);
+	}
+}
+
+/* ------------------------------------------------------------ applying */
+
+/* The transfer of an item at its level: I(rcv) += F dB(src). */
+static void gather(rad_solver *sv, uint32_t r, uint32_t s, double ff,
+                   int transient)
+{
+	double d[3];
+	node_dB(sv, s, d);
+	float *I = node_is_cluster(r) ? rad_cluster_at(&sv->h, r)->I
+	                              : rad_elem_at(&sv->h, r)->I;
+	for (int c = 0; c < 3; c++)
+		I[c] += (float)(ff * d[c]);
+	double b = fabs(luma3(d));
+	node_stat_exchange(sv, r, s, ff, b, b);
+	sv->stats.links_transient += (uint64_t)transient;
+}
+
+/* Refine an item: its children go to the next wave. */
+static rad_status split_item(rad_solver *sv, rmb_state *st, const rmb_item *it,
+                             int rcv_only)
+{
+	rad_hier *h = &sv->h;
+	rad_link *l = it->link != RAD_NONE ? rad_link_at(h, it->link) : NULL;
+	if (l && !(l->flags & L_NEW) && l->child != RAD_NONE) {
+		/* A passive link: walk the children it has. */
+		for (uint32_t k = 0; k < l->nchild; k++) {
+			const rad_link *c = rad_link_at(h, l->child + k);
+			rmb_item ci = {c->rcv, c->src, l->child + k};
+			rad_status rs = vec_push(sv, &st->next, ci);
+			if (rs)
+				return rs;
+		}
+		return RAD_OK;
+	}
+	uint32_t kr[4] = {it->rcv}, ks[4] = {it->src};
+	int nr = 1, ns = 1;
+	int side = node_split_side(h, it->rcv, it->src, rcv_only);
+	if (side & 1)
+		nr = node_children(h, it->rcv, kr);
+	if (side == 3) {
+		ns = nr;
+		memcpy(ks, kr, sizeof(ks));
+	} else if (side & 2) {
+		ns = node_children(h, it->src, ks);
+	}
+	if (nr == 0 || ns == 0)
+		return RAD_ERR_NOMEM;
+	/* With a record and a reflecting source the children may be kept:
+	 * make them as records now.  Otherwise they are transient. */
+	rmb_item kid[16];
+	int n = 0;
+	for (int a = 0; a < nr; a++) {
+		if (node_black(sv, kr[a]))
+			continue; /* reflects nothing: no transfer to make */
+		for (int b = 0; b < ns; b++) {
+			if (kr[a] == ks[b] && !node_is_cluster(kr[a]))
+				continue; /* planar: F = 0 */
+			kid[n].rcv = kr[a];
+			kid[n].src = ks[b];
+			kid[n].link = RAD_NONE;
+			n++;
+		}
+	}
+	if (n == 0) {
+		if (l) /* nothing below: carries nothing */
+			l->flags |= L_DEAD;
+		return RAD_OK;
+	}
+	if (l && !node_black(sv, it->src)) {
+		uint32_t run = rad_pool_add(&h->links, (uint32_t)n);
+		if (run == RAD_NONE)
+			return RAD_ERR_NOMEM;
+		l = rad_link_at(h, it->link); /* the table may have moved */
+		l->child = run;
+		l->nchild = (uint16_t)n;
+		l->flags |= RAD_LINK_PASSIVE;
+		if (side == 2)
+			l->flags |= RAD_LINK_SPLIT_SRC;
+		for (int k = 0; k < n; k++) {
+			rad_link *c = rad_link_at(h, run + (uint32_t)k);
+			c->rcv = kid[k].rcv;
+			c->src = kid[k].src;
+			c->next = c->child = RAD_NONE;
+			c->flags = L_NEW;
+			kid[k].link = run + (uint32_t)k;
+		}
+	}
+	for (int k = 0; k < n; k++) {
+		rad_status rs = vec_push(sv, &st->next, kid[k]);
+		if (rs)
+			return rs;
+	}
+	return RAD_OK;
+}
+
+/* Judge the current wave in parallel, then apply it in order. */
+static rad_status run_wave(rad_solver *sv, rmb_state *st)
+{
+	rad_hier *h = &sv->h;
+	size_t n = st->cand.n;
+	if (n > st->eval_cap) {
+		rmb_eval *e = rad_mem_realloc(&sv->mem, RAD_MEM_SCRATCH,
+		                              st->eval, n * sizeof(*e));
+		if (!e)
+			return RAD_ERR_NOMEM;
+		st->eval = e;
+		st->eval_cap = n;
+	}
+	eval_job job = {sv, st};
+	rad_par_for(sv->par, n, 16, eval_range, &job);
+	for (size_t i = 0; i < n; i++) {
+		const rmb_item *it = &st->cand.v[i];
+		const rmb_eval *ev = &st->eval[i];
+		rad_link *l =
+		        it->link != RAD_NONE ? rad_link_at(h, it->link) : NULL;
+		rad_status rs = RAD_OK;
+		switch (ev->action) {
+		case ACT_DROP:
+			if (l)
+				l->flags |= L_DEAD;
+			break;
+		case ACT_LEVEL:
+			gather(sv, it->rcv, it->src, ev->ff, l == NULL);
+			if (l && (l->flags & L_NEW)) {
+				l->ff = ev->ff;
+				l->spread = ev->spread;
+			} else if (l && l->child != RAD_NONE) {
+				l->flags |= L_PRUNE; /* coarser level will do */
+			}
+			break;
+		default:
+			rs = split_item(sv, st, it,
+			                ev->action == ACT_SPLIT_RCV);
+		}
+		if (rs)
+			return rs;
+	}
+	rmb_vec t = st->cand;
+	st->cand = st->next;
+	st->next = t;
+	st->next.n = 0;
+	return RAD_OK;
+}
+
+static rad_status run_waves(rad_solver *sv, rmb_state *st)
+{
+	while (st->cand.n > 0) {
+		rad_status rs = run_wave(sv, st);
+		if (rs)
+			return rs;
+		if (rad_solver_cancelled(sv))
+			st->force_store = 1; /* finish at the current level */
+	}
+	return RAD_OK;
+}
+
+/* ----------------------------------------------------------- post-order */
+
+/* Free the subtree below link id (not the link itself). */
+static void free_children(rad_solver *sv, rmb_state *st, uint32_t id,
+                          rad_status *rs)
+{
+	rad_hier *h = &sv->h;
+	rad_link *l = rad_link_at(h, id);
+	if (l->child == RAD_NONE)
+		return;
+	for (uint32_t k = 0; k < l->nchild; k++) {
+		uint32_t c = l->child + k;
+		free_children(sv, st, c, rs);
+		rad_link *cl = rad_link_at(h, c);
+		if (!(cl->flags & L_NEW)) {
+			sv->stats.links_deleted++;
+			if (sv->opt.study && !*rs)
+				*rs = set_add(sv, &st->deleted,
+				              pair_key(cl->rcv, cl->src));
+		}
+	}
+	rad_pool_release_run(&h->links, l->child, l->nchild);
+	l->child = RAD_NONE;
+	l->nchild = 0;
+	l->flags &= (uint16_t) ~(RAD_LINK_PASSIVE | RAD_LINK_SPLIT_SRC);
+}
+
+/* May a childless link be kept (the creation criterion)? */
+static int storable(const rad_solver *sv, const rad_link *l)
+{
+	if (l->flags & L_DEAD)
+		return 0;
+	if (node_is_light(l->src) || node_black(sv, l->src) ||
+	    node_black(sv, l->rcv))
+		return 0;
+	return 1;
+}
+
+/*
+ * Anticipation: will the next increment pass the oracle at this link's
+ * own level?  Then its children need not be kept.
+ */
+static int coarse_next(const rad_solver *sv, const rad_link *l)
+{
+	if (sv->opt.store != RAD_STORE_ANTICIPATE || l->rcv == l->src)
+		return 0;
+	double b = node_luma_dB(sv, l->src) * node_rho_max(sv, l->src);
+	return node_oracle(sv, l->rcv, l->src, b, l->ff) <= sv->opt.eps;
+}
+
+/*
+ * Settle link id after the walk: rebuild a passive link's form factor and
+ * spread from its children, drop what is not to be kept (compacting the
+ * sibling run in place), count.  Returns 1 if the link stays.
+ */
+static int post(rad_solver *sv, rmb_state *st, uint32_t id, rad_status *rs)
+{
+	rad_hier *h = &sv->h;
+	rad_link *l = rad_link_at(h, id);
+	if (l->child != RAD_NONE && (l->flags & (L_PRUNE | L_DEAD)))
+		free_children(sv, st, id, rs);
+	if (l->child != RAD_NONE) {
+		uint32_t run = l->child, n = l->nchild, kept = 0;
+		uint8_t keep[16];
+		double f = 0, lo = INFINITY, hi = -INFINITY, sum_sp = 0;
+		for (uint32_t k = 0; k < n; k++) {
+			keep[k] = (uint8_t)post(sv, st, run + k, rs);
+			kept += keep[k];
+			l = rad_link_at(h, id);
+			const rad_link *c = rad_link_at(h, run + k);
+			f += child_weight(sv, l, c) * c->ff;
+			lo = fmin(lo, c->ff - 0.5 * c->spread);
+			hi = fmax(hi, c->ff + 0.5 * c->spread);
+			sum_sp += c->spread;
+		}
+		l->ff = (float)f;
+		if (node_is_cluster(l->rcv))
+			l->spread = 0;
+		else if (l->flags & RAD_LINK_SPLIT_SRC)
+			l->spread = (float)sum_sp;
+		else
+			l->spread = (float)(hi - lo);
+		if (kept && coarse_next(sv, l)) {
+			for (uint32_t k = 0; k < n; k++) {
+				if (!keep[k])
+					continue;
+				rad_link *c = rad_link_at(h, run + k);
+				if (c->child != RAD_NONE) {
+					c->flags |= L_PRUNE;
+					free_children(sv, st, run + k, rs);
+				}
+				keep[k] = 0;
+				if (!(c->flags & L_NEW))
+					sv->stats.links_deleted++;
+				if (!(c->flags & L_NEW) && sv->opt.study &&
+				    !*rs)
+					*rs = set_add(sv, &st->deleted,
+					              pair_key(c->rcv, c->src));
+			}
+			kept = 0;
+		}
+		if (kept == 0) {
+			/* The children were counted (and their subtrees
+			 * freed) by their own post(). */
+			rad_pool_release_run(&h->links, run, n);
+			l->child = RAD_NONE;
+			l->nchild = 0;
+			l->flags &= (uint16_t) ~(RAD_LINK_PASSIVE |
+			                         RAD_LINK_SPLIT_SRC);
+		} else if (kept < n) {
+			uint32_t to = run;
+			for (uint32_t k = 0; k < n; k++) {
+				if (!keep[k])
+					continue;
+				if (run + k != to)
+					memcpy(rad_link_at(h, to),
+					       rad_link_at(h, run + k),
+					       sizeof(rad_link));
+				to++;
+			}
+			rad_pool_release_run(&h->links, to, n - kept);
+			l->nchild = (uint16_t)kept;
+		}
+		if (kept) {
+			l->flags &= (uint16_t) ~(L_DEAD | L_PRUNE);
+			return 1;
+		}
+	}
+	/* New links still carry L_NEW: count_tree() counts them. */
+	int keep = storable(sv, l);
+	l->flags &= (uint16_t)~L_PRUNE;
+	if (!keep && !(l->flags & L_NEW)) {
+		sv->stats.links_deleted++;
+		if (sv->opt.study && !*rs)
+			*rs = set_add(sv, &st->deleted,
+			              pair_key(l->rcv, l->src));
+	}
+	return keep;
+}
+
+static rad_status root_push(rad_solver *sv, rmb_state *st, uint32_t id)
+{
+	if (st->nroots == st->cap_roots) {
+		size_t cap = st->cap_roots ? 2 * st->cap_roots : 64;
+		uint32_t *r = rad_mem_realloc(&sv->mem, RAD_MEM_LINKS,
+		                              st->roots, cap * sizeof(*r));
+		if (!r)
+			return RAD_ERR_NOMEM;
+		st->roots = r;
+		st->cap_roots = cap;
+	}
+	st->roots[st->nroots++] = id;
+	return RAD_OK;
+}
+
+/*
+ * Walk the items in st->cand (roots of link trees), then settle the
+ * records among them; the ones kept are appended to st->roots.
+ */
+static rad_status walk_roots(rad_solver *sv, rmb_state *st, uint32_t *ids,
+                             size_t nids)
+{
+	rad_status rs = run_waves(sv, st);
+	for (size_t i = 0; i < nids && !rs; i++) {
+		if (post(sv, st, ids[i], &rs))
+			rs = rs ? rs : root_push(sv, st, ids[i]);
+		else
+			rad_pool_release(&sv->h.links, ids[i]);
+	}
+	return rs;
+}
+
+/* Ids of the new root records of one walk (SCRATCH). */
+typedef struct id_vec {
+	uint32_t *v;
+	size_t n, cap;
+} id_vec;
+
+/* A new root record (rcv <- src), or a transient item for a pure source. */
+static rad_status new_root(rad_solver *sv, rmb_state *st, uint32_t r,
+                           uint32_t s, id_vec *ids)
+{
+	rmb_item it = {r, s, RAD_NONE};
+	if (node_black(sv, r) && r != s)
+		return RAD_OK;
+	if (!node_black(sv, s)) {
+		if (ids->n == ids->cap) {
+			size_t cap = ids->cap ? 2 * ids->cap : 64;
+			uint32_t *v = rad_mem_realloc(&sv->mem, RAD_MEM_SCRATCH,
+			                              ids->v, cap * sizeof(*v));
+			if (!v)
+				return RAD_ERR_NOMEM;
+			ids->v = v;
+			ids->cap = cap;
+		}
+		it.link = rad_link_new(&sv->h, r, s, 0, 0);
+		if (it.link == RAD_NONE)
+			return RAD_ERR_NOMEM;
+		rad_link_at(&sv->h, it.link)->flags = L_NEW;
+		ids->v[ids->n++] = it.link;
+	}
+	return vec_push(sv, &st->cand, it);
+}
+
+static rad_status first_walk(rad_solver *sv, rmb_state *st)
+{
+	const rad_scene *s = sv->scene;
+	id_vec ids = {NULL, 0, 0};
+	rad_status rs = RAD_OK;
+	if (sv->opt.clustering) {
+		for (uint32_t l = 0; l < s->nlights && !rs; l++)
+			rs = new_root(sv, st, RAD_TAG_CLUSTER,
+			              l | RAD_TAG_LIGHT, &ids);
+		if (!rs)
+			rs = new_root(sv, st, RAD_TAG_CLUSTER, RAD_TAG_CLUSTER,
+			              &ids);
+		if (!rs)
+			rs = walk_roots(sv, st, ids.v, ids.n);
+	} else {
+		/* Every pair of polygons, in blocks of rows. */
+		uint32_t n = s->npolys;
+		for (uint32_t i = 0; i < n && !rs; i++) {
+			for (uint32_t l = 0; l < s->nlights && !rs; l++)
+				rs = new_root(sv, st, i, l | RAD_TAG_LIGHT,
+				              &ids);
+			for (uint32_t j = 0; j < n && !rs; j++)
+				if (i != j)
+					rs = new_root(sv, st, i, j, &ids);
+			if (!rs &&
+			    (st->cand.n >= RMB_BLOCK_PAIRS || i + 1 == n)) {
+				rs = walk_roots(sv, st, ids.v, ids.n);
+				ids.n = 0;
+				rad_solver_progress(sv, 0.8 * (i + 1) / n);
+			}
+		}
+	}
+	rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, ids.v);
+	return rs;
+}
+
+static rad_status next_walk(rad_solver *sv, rmb_state *st)
+{
+	/* The stored roots, in blocks; the ones kept are re-listed. */
+	size_t n = st->nroots;
+	uint32_t *old = st->roots;
+	st->roots = NULL;
+	st->nroots = st->cap_roots = 0;
+	rad_status rs = RAD_OK;
+	for (size_t b = 0; b < n && !rs; b += RMB_BLOCK_PAIRS) {
+		size_t e = b + RMB_BLOCK_PAIRS < n ? b + RMB_BLOCK_PAIRS : n;
+		for (size_t i = b; i < e && !rs; i++) {
+			const rad_link *l = rad_link_at(&sv->h, old[i]);
+			rmb_item it = {l->rcv, l->src, old[i]};
+			rs = vec_push(sv, &st->cand, it);
+		}
+		if (!rs)
+			rs = walk_roots(sv, st, old + b, e - b);
+	}
+	rad_mem_free(&sv->mem, RAD_MEM_LINKS, old);
+	return rs;
+}
+
+/* ------------------------------------------------- push, update, pull */
+
+typedef struct push_acc {
+	double change, total; /* sum A |luma dB|, sum A luma B */
+} push_acc;
+
+static void zero_I(rad_hier *h, uint32_t t)
+{
+	if (node_is_cluster(t)) {
+		rad_cluster *c = rad_cluster_at(h, t);
+		memset(c->I, 0, sizeof(c->I));
+		if (c->child != RAD_NONE) {
+			zero_I(h, (c->child) | RAD_TAG_CLUSTER);
+			zero_I(h, (c->child + 1) | RAD_TAG_CLUSTER);
+		}
+		return;
+	}
+	rad_elem *e = rad_elem_at(h, t);
+	memset(e->I, 0, sizeof(e->I));
+	if (e->child != RAD_NONE)
+		for (uint32_t k = 0; k < 4; k++)
+			zero_I(h, e->child + k);
+}
+
+/* A leaf's update: dB = rho I, B += dB. */
+static void update_leaf(rad_hier *h, rad_elem *e, void *ud)
+{
+	push_acc *acc = ud;
+	const rad_material *m = rad_elem_mat(h, e);
+	for (int c = 0; c < 3; c++) {
+		e->dB[c] = m->rho[c] * e->I[c];
+		e->B[c] += e->dB[c];
+	}
+	acc->change += e->area * fabs(rad_luma(e->dB));
+	acc->total += e->area * rad_luma(e->B);
+}
+
+/* --------------------------------------------------------- statistics */
+
+/* Count the links stored by kind; new ones were created this iteration. */
+static void count_tree(rad_solver *sv, rmb_state *st, uint32_t id)
+{
+	rad_stats *s = &sv->stats;
+	rad_link *l = rad_link_at(&sv->h, id);
+	node_count_link(s, l);
+	if (l->flags & L_NEW) {
+		s->links_created++;
+		if (sv->opt.study &&
+		    set_has(&st->deleted, pair_key(l->rcv, l->src)))
+			s->links_recreated++;
+		l->flags &= (uint16_t)~L_NEW;
+	}
+	if (l->child == RAD_NONE) {
+		s->links_active++;
+		return;
+	}
+	s->links_passive++;
+	for (uint32_t k = 0; k < l->nchild; k++)
+		count_tree(sv, st, l->child + k);
+}
+
+static void count_links(rad_solver *sv)
+{
+	rmb_state *st = sv->impl;
+	rad_stats *s = &sv->stats;
+	s->links = s->links_ss = s->links_sc = s->links_cc = 0;
+	s->links_light = s->links_active = s->links_passive = 0;
+	for (size_t i = 0; i < st->nroots; i++)
+		count_tree(sv, st, st->roots[i]);
+}
+
+/* ------------------------------------------------------------- solver */
+
+static rad_status rmb_init(rad_solver *sv, rad_error *err)
+{
+	rmb_state *st =
+	        rad_mem_calloc(&sv->mem, RAD_MEM_SCRATCH, 1, sizeof(*st));
+	if (!st)
+		return rad_fail(err, RAD_ERR_NOMEM, "rmb: out of memory");
+	sv->impl = st;
+	st->rays = rad_mem_calloc(&sv->mem, RAD_MEM_SCRATCH,
+	                          (size_t)rad_par_threads(sv->par),
+	                          sizeof(uint64_t));
+	st->ncl = sv->h.clusters.count;
+	st->black = rad_mem_calloc(&sv->mem, RAD_MEM_ELEM_CLUSTER, st->ncl, 1);
+	st->arefl = rad_mem_calloc(&sv->mem, RAD_MEM_ELEM_CLUSTER, st->ncl,
+	                           sizeof(float));
+	if (!st->rays || !st->black || !st->arefl)
+		return rad_fail(err, RAD_ERR_NOMEM, "rmb: out of memory");
+	mark_black(sv, 0);
+	/* B = E everywhere, then the initial pull: dB = B on every node. */
+	rad_hier_reset_emission(&sv->h);
+	for (uint32_t i = 0; i < sv->scene->npolys; i++) {
+		rad_elem *e = rad_elem_at(&sv->h, i);
+		memcpy(e->dB, e->B, sizeof(e->dB));
+	}
+	rad_hier_pull(&sv->h);
+	return RAD_OK;
+}
+
+static void release_scratch(rad_solver *sv, rmb_state *st)
+{
+	vec_free(sv, &st->cand);
+	vec_free(sv, &st->next);
+	rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, st->eval);
+	st->eval = NULL;
+	st->eval_cap = 0;
+}
+
+static rad_status rmb_step(rad_solver *sv, rad_error *err)
+{
+	rmb_state *st = sv->impl;
+	rad_hier *h = &sv->h;
+	int threads = rad_par_threads(sv->par);
+	memset(st->rays, 0, (size_t)threads * sizeof(uint64_t));
+	st->force_store = 0;
+	zero_I(h, RAD_TAG_CLUSTER);
+	for (uint32_t i = 0; i < sv->scene->npolys; i++)
+		zero_I(h, i);
+	rad_status rs = st->iter == 0 ? first_walk(sv, st) : next_walk(sv, st);
+	release_scratch(sv, st);
+	if (rs)
+		return rad_fail(err, rs,
+		                "rmb: refinement ran out of memory "
+		                "(%u elements, %u links)",
+		                rad_pool_live(&h->elems),
+		                rad_pool_live(&h->links));
+	rad_solver_progress(sv, 0.9);
+	push_acc acc = {0, 0};
+	rad_hier_push(h, update_leaf, &acc);
+	rad_hier_pull(h);
+	st->iter++;
+	st->mean_dB = acc.change / sv->scene->total_area;
+	double r = acc.total > 0 ? acc.change / acc.total : 0;
+	sv->stats.residual = r;
+	sv->stats.error_estimate = rad_error_estimate(st->prev_residual, r);
+	st->prev_residual = r;
+	for (int t = 0; t < threads; t++)
+		sv->stats.rays += st->rays[t];
+	count_links(sv);
+	rad_solver_progress(sv, 1.0);
+	if (st->force_store)
+		return rad_fail(err, RAD_ERR_CANCELLED,
+		                "cancelled during refinement; the solution "
+		                "is consistent at the level reached");
+	return RAD_OK;
+}
+
+static void rmb_destroy(rad_solver *sv)
+{
+	rmb_state *st = sv->impl;
+	if (!st)
+		return;
+	release_scratch(sv, st);
+	rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, st->rays);
+	rad_mem_free(&sv->mem, RAD_MEM_LINKS, st->roots);
+	rad_mem_free(&sv->mem, RAD_MEM_ELEM_CLUSTER, st->black);
+	rad_mem_free(&sv->mem, RAD_MEM_ELEM_CLUSTER, st->arefl);
+	rad_mem_free(&sv->mem, RAD_MEM_STUDY, st->deleted.keys);
+	rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, st);
+	sv->impl = NULL;
+}
+
+const rad_solver_ops rad_solver_rmb_ops = {
+        .name = "rmb",
+        .init = rmb_init,
+        .step = rmb_step,
+        .destroy = rmb_destroy,
+};
