@@ -14,15 +14,16 @@ set -euo pipefail
 # Build: compiler, CMake + Ninja, pkg-config (jansson, cmocka), formatter.
 # Engine and tools: Embree (BVH, pulls libtbb-dev), tinygltf, jansson.
 # Daemon and its tests: libmodbus, SQLite, cmocka; real Modbus peers
-# (mbpoll, pymodbus) for end-to-end tests; python3 validates JSON in the
-# CLI test; Node.js + npm run the Khronos glTF validator.
+# (mbpoll, pymodbus) for end-to-end tests; gnuplot for the study plots;
+# python3 validates JSON in the CLI test; Node.js + npm run the Khronos
+# glTF validator.
 # python3-serial-asyncio is only a Recommends of python3-pymodbus, but
 # `import pymodbus.client` fails without it, so it is listed explicitly.
 PACKAGES=(
 	build-essential cmake ninja-build pkg-config clang-format
 	libembree-dev libtinygltf-dev libmodbus-dev libcmocka-dev
 	libjansson-dev libsqlite3-dev
-	mbpoll python3 python3-pymodbus python3-serial-asyncio
+	mbpoll gnuplot-nox python3 python3-pymodbus python3-serial-asyncio
 	nodejs npm
 )
 

@@ -141,11 +141,17 @@ rad_status rad_hier_init(rad_hier *h, const rad_scene *s, rad_mem *mem,
 	h->min_edge = min_edge;
 	uint32_t n = s->npolys;
 	/* The roots must be one run: size the first block to hold them. */
+	/* Blocks of about n records (64 to 4096): small scenes do not pay
+	 * for big blocks, big ones do not keep long block tables. */
+	uint32_t shift = 6;
+	while (shift < 12 && (1u << shift) < n)
+		shift++;
 	rad_pool_init(&h->elems, mem, RAD_MEM_ELEM_SURFACE, sizeof(rad_elem),
-	              12, n);
+	              shift, n);
 	rad_pool_init(&h->clusters, mem, RAD_MEM_ELEM_CLUSTER,
-	              sizeof(rad_cluster), 12, 0);
-	rad_pool_init(&h->links, mem, RAD_MEM_LINKS, sizeof(rad_link), 12, 0);
+	              sizeof(rad_cluster), shift, 0);
+	rad_pool_init(&h->links, mem, RAD_MEM_LINKS, sizeof(rad_link),
+	              shift < 10 ? shift + 2 : 12, 0);
 	if (n == 0)
 		return rad_fail(err, RAD_ERR_INVALID, "scene has no polygons");
 	h->order =

@@ -19,15 +19,16 @@
  * Receivers keep no link lists: the walk over the link trees is the
  * gather.
  *
- * RefineAndGather, in waves.  The recursive walk of fig. 4.2 is done
- * breadth-first so that it is parallel and deterministic, like hr.c: a
- * wave is a list of items (receiver, source, record); the worker threads
- * judge each item (oracle on dB with the stored form factor, or on an
- * estimate for a new pair; shadow rays for a new pair at its level) into
- * the item's own slot; one thread then applies the wave in order: an item
- * at its level adds F dB to its receiver, an item to refine sends its
- * children to the next wave -- the stored ones of a passive link, or new
- * ones (elements split on demand, by this thread only).
+ * RefineAndGather, in chunks.  The recursive walk of fig. 4.2 runs over
+ * a work list of items (receiver, source, record) used as a stack, so
+ * that it stays about as short as the walk is deep.  It is parallel and
+ * deterministic like hr.c: the top chunk of the list is judged by the
+ * worker threads (oracle on dB with the stored form factor, or on an
+ * estimate for a new pair; shadow rays for a new pair at its level), each
+ * item into its own slot; one thread then applies the chunk in order: an
+ * item at its level adds F dB to its receiver, an item to refine pushes
+ * its children -- the stored ones of a passive link, or new ones
+ * (elements split on demand, by this thread only).
  *
  * What happens "on return" in fig. 4.2 -- form factors from the children,
  * which links to keep -- needs the children's results, so it is a second,
@@ -38,6 +39,9 @@
  * iteration) nothing can ever be kept, and the pairs below it are walked
  * as transient items that exist only in the wave (such a link weighs
  * nothing in its parent's recursive form factor: see child_weight()).
+ * So are the children of a link that RAD_STORE_ANTICIPATE says a coarser
+ * level will serve next time; their form factors are summed into that
+ * link, weighted, so that it carries their recursive form factor.
  * This keeps the memory of iteration 1 -- where most transfers come from
  * the sources -- close to what is finally stored.
  *
@@ -45,8 +49,9 @@
  * and its receiver both reflect (RAD_STORE_MINIMAL, the report's rule).
  * RAD_STORE_ANTICIPATE also refuses to keep the children of a link whose
  * next increment -- this one times the source's largest reflectance --
- * will pass the oracle at the link's own level: they are used now and
- * dropped, and the link stays active with their recursive form factor.
+ * will pass the oracle at the link's own level (coarse_next()): they are
+ * used now and dropped, and the link stays active with their recursive
+ * form factor.
  * A passive link with at least one child kept keeps its run (compacted
  * in place to the kept children); one with none becomes active again.  A
  * passive link found at its level deletes its whole subtree (§4.3.2).
@@ -78,6 +83,8 @@ enum {
 typedef struct rmb_item {
 	uint32_t rcv, src;
 	uint32_t link; /* its record, or RAD_NONE for a transient pair */
+	uint32_t anc;  /* transient: the record whose form factor it adds to */
+	float w;       /* transient: its weight in anc's form factor */
 } rmb_item;
 
 typedef struct rmb_eval {
@@ -97,7 +104,7 @@ typedef struct rmb_set {
 } rmb_set;
 
 typedef struct rmb_state {
-	rmb_vec cand, next; /* this wave, the next one */
+	rmb_vec cand, next; /* the work list (a stack), the chunk judged */
 	rmb_eval *eval;
 	size_t eval_cap;
 	uint64_t *rays; /* per-thread ray counters */
@@ -105,6 +112,7 @@ typedef struct rmb_state {
 	size_t nroots, cap_roots; /* stored root links, LINKS */
 	uint8_t *black;           /* per cluster id: contents all rho = 0 */
 	float *arefl;             /* per cluster id: area that reflects */
+	float *rhomax;            /* per cluster id: largest reflectance */
 	uint32_t ncl;
 	uint32_t iter;   /* iterations done */
 	int force_store; /* cancelled: keep pairs at their level */
@@ -203,19 +211,29 @@ static double node_arefl(const rad_solver *sv, uint32_t t)
 	return node_black(sv, t) ? 0 : node_area(&sv->h, t);
 }
 
-/* Fill black[] and arefl[] for cluster id and below. */
+static double elem_rho_max(const rad_solver *sv, uint32_t id)
+{
+	const float *rho = rad_elem_mat(&sv->h, rad_elem_at(&sv->h, id))->rho;
+	return fmax(rho[0], fmax(rho[1], rho[2]));
+}
+
+/* Fill black[], arefl[] and rhomax[] for cluster id and below. */
 static double mark_black(rad_solver *sv, uint32_t id)
 {
 	rmb_state *st = sv->impl;
 	const rad_cluster *c = rad_cluster_at(&sv->h, id);
-	double a = 0;
+	double a = 0, rm = 0;
 	if (c->child != RAD_NONE) {
 		a += mark_black(sv, c->child);
 		a += mark_black(sv, c->child + 1);
+		rm = fmax(st->rhomax[c->child], st->rhomax[c->child + 1]);
 	} else {
-		for (uint32_t j = c->first; j < c->first + c->count; j++)
+		for (uint32_t j = c->first; j < c->first + c->count; j++) {
 			a += node_arefl(sv, sv->h.order[j]);
+			rm = fmax(rm, elem_rho_max(sv, sv->h.order[j]));
+		}
 	}
+	st->rhomax[id] = (float)rm;
 	st->arefl[id] = (float)a;
 	st->black[id] = a == 0;
 	return a;
@@ -286,13 +304,12 @@ static double node_luma_dB(const rad_solver *sv, uint32_t t)
 /* Largest reflectance inside a node (over channels), for anticipation. */
 static double node_rho_max(const rad_solver *sv, uint32_t t)
 {
-	const rad_hier *h = &sv->h;
+	const rmb_state *st = sv->impl;
 	if (node_is_light(t))
 		return 0;
 	if (node_is_cluster(t))
-		return 1; /* mixed contents: assume the worst */
-	const float *rho = rad_elem_mat(h, rad_elem_at(h, t))->rho;
-	return fmax(rho[0], fmax(rho[1], rho[2]));
+		return st->rhomax[node_index(t)];
+	return elem_rho_max(sv, t);
 }
 
 static double spread_limit(const rad_solver *sv)
@@ -385,7 +402,7 @@ static void eval_range(void *ud, size_t b, size_t e, int thread)
 	eval_job *j = ud;
 	for (size_t i = b; i < e; i++) {
 		rmb_eval *out = &j->st->eval[i];
-		out->action = evaluate(j->sv, &j->st->cand.v[i], &out->ff,
+		out->action = evaluate(j->sv, &j->st->next.v[i], &out->ff,
 		                       &out->spread, &j->st->rays[thread]);
 	}
 }
@@ -407,6 +424,21 @@ static void gather(rad_solver *sv, uint32_t r, uint32_t s, double ff,
 	sv->stats.links_transient += (uint64_t)transient;
 }
 
+/*
+ * Anticipation (RAD_STORE_ANTICIPATE): will the next increment of this
+ * link -- this one times the source's largest reflectance -- pass the
+ * oracle at the link's own level?  Then the children it is about to get
+ * will not be needed next time: they are walked as transient pairs and
+ * the link stays active with their recursive form factor.
+ */
+static int coarse_next(const rad_solver *sv, uint32_t r, uint32_t s, double f)
+{
+	if (sv->opt.store != RAD_STORE_ANTICIPATE || r == s)
+		return 0;
+	double b = node_luma_dB(sv, s) * node_rho_max(sv, s);
+	return node_oracle(sv, r, s, b, f) <= sv->opt.eps;
+}
+
 /* Refine an item: its children go to the next wave. */
 static rad_status split_item(rad_solver *sv, rmb_state *st, const rmb_item *it,
                              int rcv_only)
@@ -417,8 +449,9 @@ static rad_status split_item(rad_solver *sv, rmb_state *st, const rmb_item *it,
 		/* A passive link: walk the children it has. */
 		for (uint32_t k = 0; k < l->nchild; k++) {
 			const rad_link *c = rad_link_at(h, l->child + k);
-			rmb_item ci = {c->rcv, c->src, l->child + k};
-			rad_status rs = vec_push(sv, &st->next, ci);
+			rmb_item ci = {c->rcv, c->src, l->child + k, RAD_NONE,
+			               0};
+			rad_status rs = vec_push(sv, &st->cand, ci);
 			if (rs)
 				return rs;
 		}
@@ -447,9 +480,13 @@ static rad_status split_item(rad_solver *sv, rmb_state *st, const rmb_item *it,
 		for (int b = 0; b < ns; b++) {
 			if (kr[a] == ks[b] && !node_is_cluster(kr[a]))
 				continue; /* planar: F = 0 */
+			if (kr[a] != ks[b] && !node_facing(h, kr[a], ks[b]))
+				continue; /* no record for what cannot carry */
 			kid[n].rcv = kr[a];
 			kid[n].src = ks[b];
 			kid[n].link = RAD_NONE;
+			kid[n].anc = RAD_NONE;
+			kid[n].w = 0;
 			n++;
 		}
 	}
@@ -458,7 +495,13 @@ static rad_status split_item(rad_solver *sv, rmb_state *st, const rmb_item *it,
 			l->flags |= L_DEAD;
 		return RAD_OK;
 	}
-	if (l && !node_black(sv, it->src)) {
+	int keepable = l && !node_black(sv, it->src);
+	if (keepable &&
+	    coarse_next(sv, it->rcv, it->src,
+	                l->flags & L_NEW ? node_ff_estimate(h, it->rcv, it->src)
+	                                 : l->ff))
+		keepable = 0;
+	if (keepable) {
 		uint32_t run = rad_pool_add(&h->links, (uint32_t)n);
 		if (run == RAD_NONE)
 			return RAD_ERR_NOMEM;
@@ -476,77 +519,27 @@ static rad_status split_item(rad_solver *sv, rmb_state *st, const rmb_item *it,
 			c->flags = L_NEW;
 			kid[k].link = run + (uint32_t)k;
 		}
+	} else if (l || it->anc != RAD_NONE) {
+		/* Transient children: their form factors add up into the
+		 * nearest record, weighted as in its recursion. */
+		uint32_t anc = l ? it->link : it->anc;
+		double w0 = l ? 1.0 : it->w;
+		if (l)
+			l->ff = 0;
+		rad_link par = {.rcv = it->rcv, .src = it->src};
+		for (int k = 0; k < n; k++) {
+			rad_link ch = {.rcv = kid[k].rcv, .src = kid[k].src};
+			kid[k].anc = anc;
+			kid[k].w = (float)(w0 * child_weight(sv, &par, &ch));
+		}
 	}
 	for (int k = 0; k < n; k++) {
-		rad_status rs = vec_push(sv, &st->next, kid[k]);
+		rad_status rs = vec_push(sv, &st->cand, kid[k]);
 		if (rs)
 			return rs;
 	}
 	return RAD_OK;
 }
-
-/* Judge the current wave in parallel, then apply it in order. */
-static rad_status run_wave(rad_solver *sv, rmb_state *st)
-{
-	rad_hier *h = &sv->h;
-	size_t n = st->cand.n;
-	if (n > st->eval_cap) {
-		rmb_eval *e = rad_mem_realloc(&sv->mem, RAD_MEM_SCRATCH,
-		                              st->eval, n * sizeof(*e));
-		if (!e)
-			return RAD_ERR_NOMEM;
-		st->eval = e;
-		st->eval_cap = n;
-	}
-	eval_job job = {sv, st};
-	rad_par_for(sv->par, n, 16, eval_range, &job);
-	for (size_t i = 0; i < n; i++) {
-		const rmb_item *it = &st->cand.v[i];
-		const rmb_eval *ev = &st->eval[i];
-		rad_link *l =
-		        it->link != RAD_NONE ? rad_link_at(h, it->link) : NULL;
-		rad_status rs = RAD_OK;
-		switch (ev->action) {
-		case ACT_DROP:
-			if (l)
-				l->flags |= L_DEAD;
-			break;
-		case ACT_LEVEL:
-			gather(sv, it->rcv, it->src, ev->ff, l == NULL);
-			if (l && (l->flags & L_NEW)) {
-				l->ff = ev->ff;
-				l->spread = ev->spread;
-			} else if (l && l->child != RAD_NONE) {
-				l->flags |= L_PRUNE; /* coarser level will do */
-			}
-			break;
-		default:
-			rs = split_item(sv, st, it,
-			                ev->action == ACT_SPLIT_RCV);
-		}
-		if (rs)
-			return rs;
-	}
-	rmb_vec t = st->cand;
-	st->cand = st->next;
-	st->next = t;
-	st->next.n = 0;
-	return RAD_OK;
-}
-
-static rad_status run_waves(rad_solver *sv, rmb_state *st)
-{
-	while (st->cand.n > 0) {
-		rad_status rs = run_wave(sv, st);
-		if (rs)
-			return rs;
-		if (rad_solver_cancelled(sv))
-			st->force_store = 1; /* finish at the current level */
-	}
-	return RAD_OK;
-}
-
-/* ----------------------------------------------------------- post-order */
 
 /* Free the subtree below link id (not the link itself). */
 static void free_children(rad_solver *sv, rmb_state *st, uint32_t id,
@@ -573,6 +566,84 @@ static void free_children(rad_solver *sv, rmb_state *st, uint32_t id,
 	l->flags &= (uint16_t) ~(RAD_LINK_PASSIVE | RAD_LINK_SPLIT_SRC);
 }
 
+/* Items judged at once: enough for the threads, small enough that the
+ * work list stays short (it is a stack: depth x chunk x children). */
+#define RMB_CHUNK 4096
+
+/*
+ * Judge the top chunk of the work list in parallel, then apply it in
+ * order; children are pushed on the list.
+ */
+static rad_status run_chunk(rad_solver *sv, rmb_state *st)
+{
+	rad_hier *h = &sv->h;
+	size_t n = st->cand.n < RMB_CHUNK ? st->cand.n : RMB_CHUNK;
+	st->cand.n -= n;
+	st->next.n = 0;
+	for (size_t i = 0; i < n; i++) {
+		rad_status rs =
+		        vec_push(sv, &st->next, st->cand.v[st->cand.n + i]);
+		if (rs)
+			return rs;
+	}
+	if (n > st->eval_cap) {
+		rmb_eval *e = rad_mem_realloc(&sv->mem, RAD_MEM_SCRATCH,
+		                              st->eval, n * sizeof(*e));
+		if (!e)
+			return RAD_ERR_NOMEM;
+		st->eval = e;
+		st->eval_cap = n;
+	}
+	eval_job job = {sv, st};
+	rad_par_for(sv->par, n, 16, eval_range, &job);
+	for (size_t i = 0; i < n; i++) {
+		const rmb_item *it = &st->next.v[i];
+		const rmb_eval *ev = &st->eval[i];
+		rad_link *l =
+		        it->link != RAD_NONE ? rad_link_at(h, it->link) : NULL;
+		rad_status rs = RAD_OK;
+		switch (ev->action) {
+		case ACT_DROP:
+			if (l)
+				l->flags |= L_DEAD;
+			break;
+		case ACT_LEVEL:
+			gather(sv, it->rcv, it->src, ev->ff, l == NULL);
+			if (l && (l->flags & L_NEW)) {
+				l->ff = ev->ff;
+				l->spread = ev->spread;
+			} else if (l && l->child != RAD_NONE) {
+				/* A coarser level will do: the subtree goes
+				 * now, so that this walk reuses its records. */
+				free_children(sv, st, it->link, &rs);
+			} else if (!l && it->anc != RAD_NONE) {
+				rad_link_at(h, it->anc)->ff += it->w * ev->ff;
+			}
+			break;
+		default:
+			rs = split_item(sv, st, it,
+			                ev->action == ACT_SPLIT_RCV);
+		}
+		if (rs)
+			return rs;
+	}
+	return RAD_OK;
+}
+
+static rad_status run_waves(rad_solver *sv, rmb_state *st)
+{
+	while (st->cand.n > 0) {
+		rad_status rs = run_chunk(sv, st);
+		if (rs)
+			return rs;
+		if (rad_solver_cancelled(sv))
+			st->force_store = 1; /* finish at the current level */
+	}
+	return RAD_OK;
+}
+
+/* ----------------------------------------------------------- post-order */
+
 /* May a childless link be kept (the creation criterion)? */
 static int storable(const rad_solver *sv, const rad_link *l)
 {
@@ -582,18 +653,6 @@ static int storable(const rad_solver *sv, const rad_link *l)
 	    node_black(sv, l->rcv))
 		return 0;
 	return 1;
-}
-
-/*
- * Anticipation: will the next increment pass the oracle at this link's
- * own level?  Then its children need not be kept.
- */
-static int coarse_next(const rad_solver *sv, const rad_link *l)
-{
-	if (sv->opt.store != RAD_STORE_ANTICIPATE || l->rcv == l->src)
-		return 0;
-	double b = node_luma_dB(sv, l->src) * node_rho_max(sv, l->src);
-	return node_oracle(sv, l->rcv, l->src, b, l->ff) <= sv->opt.eps;
 }
 
 /*
@@ -628,25 +687,6 @@ static int post(rad_solver *sv, rmb_state *st, uint32_t id, rad_status *rs)
 			l->spread = (float)sum_sp;
 		else
 			l->spread = (float)(hi - lo);
-		if (kept && coarse_next(sv, l)) {
-			for (uint32_t k = 0; k < n; k++) {
-				if (!keep[k])
-					continue;
-				rad_link *c = rad_link_at(h, run + k);
-				if (c->child != RAD_NONE) {
-					c->flags |= L_PRUNE;
-					free_children(sv, st, run + k, rs);
-				}
-				keep[k] = 0;
-				if (!(c->flags & L_NEW))
-					sv->stats.links_deleted++;
-				if (!(c->flags & L_NEW) && sv->opt.study &&
-				    !*rs)
-					*rs = set_add(sv, &st->deleted,
-					              pair_key(c->rcv, c->src));
-			}
-			kept = 0;
-		}
 		if (kept == 0) {
 			/* The children were counted (and their subtrees
 			 * freed) by their own post(). */
@@ -728,7 +768,7 @@ typedef struct id_vec {
 static rad_status new_root(rad_solver *sv, rmb_state *st, uint32_t r,
                            uint32_t s, id_vec *ids)
 {
-	rmb_item it = {r, s, RAD_NONE};
+	rmb_item it = {r, s, RAD_NONE, RAD_NONE, 0};
 	if (node_black(sv, r) && r != s)
 		return RAD_OK;
 	if (!node_black(sv, s)) {
@@ -798,7 +838,7 @@ static rad_status next_walk(rad_solver *sv, rmb_state *st)
 		size_t e = b + RMB_BLOCK_PAIRS < n ? b + RMB_BLOCK_PAIRS : n;
 		for (size_t i = b; i < e && !rs; i++) {
 			const rad_link *l = rad_link_at(&sv->h, old[i]);
-			rmb_item it = {l->rcv, l->src, old[i]};
+			rmb_item it = {l->rcv, l->src, old[i], RAD_NONE, 0};
 			rs = vec_push(sv, &st->cand, it);
 		}
 		if (!rs)
@@ -840,6 +880,10 @@ static void update_leaf(rad_hier *h, rad_elem *e, void *ud)
 	for (int c = 0; c < 3; c++) {
 		e->dB[c] = m->rho[c] * e->I[c];
 		e->B[c] += e->dB[c];
+		/* Leaves report the total irradiance, not the increment
+		 * (a black leaf gathers nothing: it keeps the last one). */
+		if (m->rho[c] > 0)
+			e->I[c] = (e->B[c] - m->emit[c]) / m->rho[c];
 	}
 	acc->change += e->area * fabs(rad_luma(e->dB));
 	acc->total += e->area * rad_luma(e->B);
@@ -895,7 +939,9 @@ static rad_status rmb_init(rad_solver *sv, rad_error *err)
 	st->black = rad_mem_calloc(&sv->mem, RAD_MEM_ELEM_CLUSTER, st->ncl, 1);
 	st->arefl = rad_mem_calloc(&sv->mem, RAD_MEM_ELEM_CLUSTER, st->ncl,
 	                           sizeof(float));
-	if (!st->rays || !st->black || !st->arefl)
+	st->rhomax = rad_mem_calloc(&sv->mem, RAD_MEM_ELEM_CLUSTER, st->ncl,
+	                            sizeof(float));
+	if (!st->rays || !st->black || !st->arefl || !st->rhomax)
 		return rad_fail(err, RAD_ERR_NOMEM, "rmb: out of memory");
 	mark_black(sv, 0);
 	/* B = E everywhere, then the initial pull: dB = B on every node. */
@@ -966,6 +1012,7 @@ static void rmb_destroy(rad_solver *sv)
 	rad_mem_free(&sv->mem, RAD_MEM_LINKS, st->roots);
 	rad_mem_free(&sv->mem, RAD_MEM_ELEM_CLUSTER, st->black);
 	rad_mem_free(&sv->mem, RAD_MEM_ELEM_CLUSTER, st->arefl);
+	rad_mem_free(&sv->mem, RAD_MEM_ELEM_CLUSTER, st->rhomax);
 	rad_mem_free(&sv->mem, RAD_MEM_STUDY, st->deleted.keys);
 	rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, st);
 	sv->impl = NULL;

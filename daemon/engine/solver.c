@@ -72,7 +72,7 @@ static rad_status check_options(const rad_options *o, rad_error *err)
 	if ((unsigned)o->oracle > RAD_ORACLE_BF)
 		return rad_fail(err, RAD_ERR_INVALID, "unknown oracle %d",
 		                (int)o->oracle);
-	if ((unsigned)o->store > RAD_STORE_ANTICIPATE)
+	if ((unsigned)o->store > RAD_STORE_MINIMAL)
 		return rad_fail(err, RAD_ERR_INVALID,
 		                "unknown link creation criterion %d",
 		                (int)o->store);

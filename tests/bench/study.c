@@ -6,7 +6,8 @@
  * Two modes:
  *
  *   luxrad-study [options] SCENE...
- *       runs hr and rmb on each scene at the same eps for N iterations
+ *       runs hr, rmb and rmb with the report's creation criterion alone
+ *       (rmb-minimal) on each scene at the same eps for N iterations
  *       with study statistics on, and writes to --out DIR:
  *         iterations.csv  one row per scene x solver x iteration: every
  *                         counter of rad_stats, memory by structure, the
@@ -217,7 +218,7 @@ static void csv_row(FILE *f, const char *scene, const char *solver,
 static int solve(const rad_scene *sc, const rad_options *opt,
                  uint32_t iterations, double tol, uint32_t max_iter,
                  const double *grid, size_t npts, FILE *csv, const char *name,
-                 run_result *r)
+                 const char *label, run_result *r)
 {
 	rad_solver *sv;
 	rad_error err;
@@ -236,8 +237,7 @@ static int solve(const rad_scene *sc, const rad_options *opt,
 		}
 		rad_solver_stats(sv, &r->last);
 		if (csv)
-			csv_row(csv, name, rad_solver_kind_name(opt->solver),
-			        &r->last);
+			csv_row(csv, name, label, &r->last);
 		if (!iterations && r->last.error_estimate <= tol)
 			break;
 	}
@@ -280,7 +280,8 @@ static int run_study(const study_args *a)
 	fprintf(sum, "scene,polygons,eps,iterations,links_hr,links_rmb,"
 	             "links_ratio,peak_hr,peak_rmb,peak_ratio,seconds_hr,"
 	             "seconds_rmb,time_ratio,grid_rms_rel,grid_mean_hr,"
-	             "grid_mean_rmb\n");
+	             "grid_mean_rmb,links_rmb_minimal,peak_rmb_minimal,"
+	             "seconds_rmb_minimal,grid_rms_rel_minimal\n");
 	int rc = 0;
 	for (int i = 0; i < a->nscenes && !rc; i++) {
 		rad_scene *sc;
@@ -293,17 +294,22 @@ static int run_study(const study_args *a)
 		rad_scene_counts_get(sc, &cnt);
 		size_t npts = (size_t)a->grid * a->grid;
 		double *grid = make_grid(sc, a->grid);
-		run_result r[2];
+		run_result r[3];
 		memset(r, 0, sizeof(r));
 		const char *name = base_name(a->scenes[i]);
-		for (int k = 0; k < 2 && grid && !rc; k++) {
+		/* hr, rmb, rmb with the report's criterion alone */
+		static const char *const label[3] = {"hr", "rmb",
+		                                     "rmb-minimal"};
+		for (int k = 0; k < 3 && grid && !rc; k++) {
 			rad_options o = a->opt;
 			o.solver = k ? RAD_SOLVER_RMB : RAD_SOLVER_HR;
+			o.store = k == 2 ? RAD_STORE_MINIMAL
+			                 : RAD_STORE_ANTICIPATE;
 			o.study = 1;
 			fprintf(stderr, "luxrad-study: %s: %s...\n", name,
-			        rad_solver_kind_name(o.solver));
+			        label[k]);
 			rc = solve(sc, &o, a->iterations, 0, 0, grid, npts, csv,
-			           name, &r[k]);
+			           name, label[k], &r[k]);
 		}
 		if (!grid)
 			rc = 1;
@@ -316,7 +322,8 @@ static int run_study(const study_args *a)
 			fprintf(sum,
 			        "%s,%u,%g,%u,%llu,%llu,%.4f,%lld,%lld,%.4f,%."
 			        "4f,"
-			        "%.4f,%.4f,%.6f,%.4f,%.4f\n",
+			        "%.4f,%.4f,%.6f,%.4f,%.4f,%llu,%lld,%.4f,%."
+			        "6f\n",
 			        name, cnt.polygons, a->opt.eps, a->iterations,
 			        (unsigned long long)r[0].last.links,
 			        (unsigned long long)r[1].last.links,
@@ -329,11 +336,14 @@ static int run_study(const study_args *a)
 			        r[0].seconds, r[1].seconds,
 			        r[1].seconds /
 			                (r[0].seconds > 0 ? r[0].seconds : 1),
-			        rel_rms(r[1].lux, r[0].lux, npts), m0, m1);
+			        rel_rms(r[1].lux, r[0].lux, npts), m0, m1,
+			        (unsigned long long)r[2].last.links,
+			        (long long)r[2].peak, r[2].seconds,
+			        rel_rms(r[2].lux, r[0].lux, npts));
 			fflush(sum);
 			fflush(csv);
 		}
-		for (int k = 0; k < 2; k++)
+		for (int k = 0; k < 3; k++)
 			free(r[k].lux);
 		free(grid);
 		rad_scene_free(sc);
@@ -383,7 +393,7 @@ static int run_trade(const study_args *a)
 			fprintf(stderr, "luxrad-study: %s: reference...\n",
 			        name);
 			rc = solve(sc, &o, 0, a->tol / 10, 200, grid, npts,
-			           NULL, name, &r);
+			           NULL, name, "reference", &r);
 			if (!rc)
 				memcpy(ref, r.lux, npts * sizeof(double));
 			free(r.lux);
@@ -407,7 +417,7 @@ static int run_trade(const study_args *a)
 				        name, rad_solver_kind_name(o.solver),
 				        ladder[e]);
 				rc = solve(sc, &o, 0, a->tol, a->max_iter, grid,
-				           npts, NULL, name, &r);
+				           npts, NULL, name, NULL, &r);
 				if (rc)
 					break;
 				double m = 0;

@@ -150,6 +150,52 @@ static void check_uniform_box(rad_solver_kind kind, double rho,
 	rad_scene_free(s);
 }
 
+/* A 10^6 cd and a 1 cd source in one room, at scales 1e-3 and 1e3: the
+ * answer scales as it must and is never NaN or negative. */
+static void test_rmb_extremes(void **state)
+{
+	(void)state;
+	double lux[2][2];
+	const double scale[2] = {1e-3, 1e3};
+	for (int k = 0; k < 2; k++) {
+		double m = scale[k];
+		rad_light_desc L[2];
+		memset(L, 0, sizeof(L));
+		for (int i = 0; i < 2; i++) {
+			L[i].kind = RAD_LIGHT_POINT;
+			L[i].position[0] = (0.2 + 0.6 * i) * m;
+			L[i].position[1] = 0.6 * m;
+			L[i].position[2] = 0.5 * m;
+			for (int c = 0; c < 3; c++)
+				L[i].intensity[c] = i ? 1 : 1e6;
+		}
+		rad_error err;
+		rad_scene *s = make_box(m, 0.8 * m, m, 0.7, 0, &L[0]);
+		rad_options o;
+		rad_options_default(&o);
+		o.solver = RAD_SOLVER_RMB;
+		o.threads = 2;
+		o.eps = 1e-3;
+		rad_solver *sv = solve_opt(s, &o, 1e-3);
+		const double pts[2][6] = {{0.5 * m, 0, 0.5 * m, 0, 1, 0},
+		                          {0.9 * m, 0.4 * m, 0.1 * m, 0, 0, 1}};
+		assert_int_equal(
+		        rad_solver_illuminance(sv, &pts[0][0], 2, lux[k], &err),
+		        RAD_OK);
+		for (int i = 0; i < 2; i++) {
+			print_message("scale %g: point %d %.6g lux x m^2\n", m,
+			              i, lux[k][i] * m * m);
+			assert_true(isfinite(lux[k][i]) && lux[k][i] > 0);
+		}
+		rad_solver_free(sv);
+		rad_scene_free(s);
+	}
+	/* Illuminance from a point source scales as 1 / m^2. */
+	for (int i = 0; i < 2; i++)
+		assert_true(fabs(lux[0][i] * 1e-6 / (lux[1][i] * 1e6) - 1) <
+		            0.02);
+}
+
 static void test_uniform_box_hr_05(void **state)
 {
 	(void)state;
@@ -293,6 +339,7 @@ int main(void)
 {
 	const struct CMUnitTest tests[] = {
 	        cmocka_unit_test(test_uniform_box_hr_05),
+	        cmocka_unit_test(test_rmb_extremes),
 	        cmocka_unit_test(test_uniform_box_hr_09),
 	        cmocka_unit_test(test_uniform_box_hr_099),
 	        cmocka_unit_test(test_uniform_box_matrix_099),

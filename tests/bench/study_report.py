@@ -1,0 +1,128 @@
+"""study_report.py -- turn luxrad-study's CSV files into report.md and PNG
+plots (gnuplot, pngcairo).  Usage: study_report.py OUTDIR
+
+The report's own figures (ALGORITHM.md, fig. 4.4, 4.7, 4.8) are printed
+beside ours; they are literature values, not measured here.
+"""
+import csv
+import os
+import subprocess
+import sys
+
+out = sys.argv[1]
+rows = list(csv.DictReader(open(os.path.join(out, "iterations.csv"))))
+summary = list(csv.DictReader(open(os.path.join(out, "summary.csv"))))
+trade_path = os.path.join(out, "trade.csv")
+trade = list(csv.DictReader(open(trade_path))) if os.path.exists(trade_path) else []
+
+REPORT = {  # scene: links classic, links new, MB classic, MB new, time
+    "herd.glb": ("212,848", "209,433", "64.4", "56.0", "39m36s / 27m48s"),
+    "hall-full.glb": ("1,100,641", "673,705", "95.0", "72.8", "2h58m / 2h14m"),
+    "hall-bright.glb": ("387,624", "185,682", "25.5", "15.7", "13m08s / 16m41s"),
+}
+
+md = ["# Reduced-memory study: hr against rmb", ""]
+md.append("Regenerate: `bash tests/bench/study.sh` (all figures below come "
+          "from one run on one machine; times are wall clock and noisy).")
+md.append("")
+md.append("## Links, peak memory and time after %s iterations (same eps)"
+          % (summary[0]["iterations"] if summary else "?"))
+md.append("")
+md.append("| scene | polygons | links hr | links rmb | ratio | peak hr MB | "
+          "peak rmb MB | ratio | time hr s | time rmb s | ratio | grid RMS "
+          "rmb vs hr | rmb-minimal links | rmb-minimal peak MB |")
+md.append("|" + "---|" * 14)
+for s in summary:
+    mb = lambda b: "%.1f" % (int(b) / 1e6)
+    md.append("| %s | %s | %s | %s | %.3f | %s | %s | %.3f | %.2f | %.2f | "
+              "%.3f | %.2f %% | %s | %s |" % (
+                  s["scene"], s["polygons"], s["links_hr"], s["links_rmb"],
+                  float(s["links_ratio"]), mb(s["peak_hr"]), mb(s["peak_rmb"]),
+                  float(s["peak_ratio"]), float(s["seconds_hr"]),
+                  float(s["seconds_rmb"]), float(s["time_ratio"]),
+                  100 * float(s["grid_rms_rel"]), s["links_rmb_minimal"],
+                  mb(s["peak_rmb_minimal"])))
+md.append("")
+md.append("The report (1998, SGI; ALGORITHM.md §4):")
+md.append("")
+md.append("| scene | links classic | links new | memory classic MB | "
+          "memory new MB | time 4 it. classic / new |")
+md.append("|---|---|---|---|---|---|")
+for k, v in REPORT.items():
+    md.append("| %s | %s |" % (k, " | ".join(v)))
+md.append("")
+
+if trade:
+    md.append("## Speed / accuracy trade (converged to 1e-3)")
+    md.append("")
+    md.append("| scene | solver | eps | iterations | seconds | links | "
+              "peak MB | grid error vs reference |")
+    md.append("|---|---|---|---|---|---|---|---|")
+    for t in trade:
+        md.append("| %s | %s | %s | %s | %.2f | %s | %.1f | %.2f %% |" % (
+            t["scene"], t["solver"], t["eps"], t["iterations"],
+            float(t["seconds"]), t["links"], int(t["peak_bytes"]) / 1e6,
+            100 * float(t["grid_rms_rel"])))
+    md.append("")
+
+
+def series(scene, solver, col):
+    return [(int(r["iteration"]), float(r[col])) for r in rows
+            if r["scene"] == scene and r["solver"] == solver]
+
+
+def plot(png, title, ylabel, curves, logy=True):
+    """curves: list of (label, [(x, y)...])."""
+    dat = os.path.join(out, png + ".dat")
+    with open(dat, "w") as f:
+        for label, pts in curves:
+            f.write("# %s\n" % label)
+            for x, y in pts:
+                f.write("%g %g\n" % (x, y))
+            f.write("\n\n")
+    cmds = ["set terminal pngcairo size 900,560",
+            "set output '%s'" % os.path.join(out, png + ".png"),
+            "set title '%s'" % title, "set xlabel 'iteration'",
+            "set ylabel '%s'" % ylabel, "set key outside right",
+            "set grid"]
+    if logy:
+        cmds.append("set logscale y")
+    plots = ["'%s' index %d with linespoints title '%s'" % (dat, i, label)
+             for i, (label, _) in enumerate(curves)]
+    cmds.append("plot " + ", ".join(plots))
+    subprocess.run(["gnuplot"], input="\n".join(cmds), text=True, check=True)
+    os.remove(dat)
+    md.append("![%s](%s.png)" % (title, png))
+    md.append("")
+
+
+scenes = sorted({r["scene"] for r in rows})
+md.append("## Figures")
+md.append("")
+plot("fig3_5_links", "Links stored per iteration (fig. 3.5, 4.4)", "links",
+     [("%s %s" % (s, v), series(s, v, "links")) for s in scenes
+      for v in ("hr", "rmb")])
+plot("fig3_7_useful", "hr: useful vs created links (fig. 3.7)", "links",
+     [("%s %s" % (s, c), series(s, "hr", "links_" + c)) for s in scenes
+      for c in ("created", "useful")])
+per_elem = lambda s, v: [(x, l / max(e, 1)) for (x, l), (_, e) in
+                         zip(series(s, v, "links"), series(s, v, "elements"))]
+plot("fig3_8_links_per_element", "Links per element (fig. 3.8)",
+     "links / element", [("%s %s" % (s, v), per_elem(s, v)) for s in scenes
+                         for v in ("hr", "rmb")])
+plot("fig3_9_leaves", "Leaves per iteration (fig. 3.9)", "leaves",
+     [("%s %s" % (s, v), series(s, v, "leaves")) for s in scenes
+      for v in ("hr", "rmb")])
+plot("fig4_3_rmb_stored_useful", "rmb: stored vs useful links (fig. 4.3)",
+     "links", [("%s %s" % (s, c), series(s, "rmb", c)) for s in scenes
+               for c in ("links", "links_active", "links_useful")])
+plot("fig4_7_memory", "Memory (peak so far) classic vs new (fig. 4.7)",
+     "bytes", [("%s %s" % (s, v), series(s, v, "mem_peak_work"))
+               for s in scenes for v in ("hr", "rmb")])
+plot("fig4_9_recreated", "rmb: links re-created per iteration (fig. 4.9)",
+     "links", [(s, [(x, max(y, 0.5)) for x, y in
+                    series(s, "rmb", "links_recreated")]) for s in scenes])
+
+with open(os.path.join(out, "report.md"), "w") as f:
+    f.write("\n".join(md) + "\n")
+print("\n".join(md[:40]))
