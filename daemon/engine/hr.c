@@ -77,7 +77,6 @@ typedef struct hr_state {
 	double mean_B;   /* area-mean photopic radiosity of the last step */
 	double *vals;    /* scratch for budget_cut */
 	size_t vals_cap;
-	double prev_residual;
 } hr_state;
 
 /* Rows of initial polygon pairs evaluated at once without clustering. */
@@ -86,15 +85,11 @@ typedef struct hr_state {
 static rad_status vec_push(rad_solver *sv, hr_vec *v, uint32_t r, uint32_t s,
                            uint32_t rcv_only)
 {
-	if (v->n == v->cap) {
-		size_t cap = v->cap ? 2 * v->cap : 1024;
-		hr_pair *p = rad_mem_realloc(&sv->mem, RAD_MEM_SCRATCH, v->v,
-		                             cap * sizeof(*p));
-		if (!p)
-			return RAD_ERR_NOMEM;
-		v->v = p;
-		v->cap = cap;
-	}
+	hr_pair *p = rad_mem_grow(&sv->mem, RAD_MEM_SCRATCH, v->v, &v->cap,
+	                          v->n + 1, sizeof(*p), 1024);
+	if (!p)
+		return RAD_ERR_NOMEM;
+	v->v = p;
 	v->v[v->n].rcv = r;
 	v->v[v->n].src = s;
 	v->v[v->n].rcv_only = rcv_only;
@@ -656,11 +651,7 @@ static rad_status hr_step(rad_solver *sv, rad_error *err)
 	st->started = 1;
 	release_scratch(sv, st);
 	if (rs)
-		return rad_fail(err, rs,
-		                "hr: refinement ran out of memory "
-		                "(%u elements, %u links)",
-		                rad_pool_live(&h->elems),
-		                rad_pool_live(&h->links));
+		return node_refine_failed(sv, rs, err);
 	rad_solver_progress(sv, 0.8);
 	gather_clusters(h, 0);
 	rad_par_for(sv->par, sv->scene->npolys, 64, gather_roots, h);
@@ -668,18 +659,9 @@ static rad_status hr_step(rad_solver *sv, rad_error *err)
 	int first = sv->stats.iteration == 0;
 	walk_all(sv, study_node, &first);
 	double r = push_and_update(h, &st->mean_B);
-	sv->stats.residual = r;
-	sv->stats.error_estimate = rad_error_estimate(st->prev_residual, r);
-	st->prev_residual = r;
-	for (int t = 0; t < threads; t++)
-		sv->stats.rays += st->rays[t];
+	rad_solver_set_residual(sv, r);
 	count_links(sv);
-	rad_solver_progress(sv, 1.0);
-	if (st->force_store)
-		return rad_fail(err, RAD_ERR_CANCELLED,
-		                "cancelled during refinement; the solution "
-		                "is consistent at the level reached");
-	return RAD_OK;
+	return node_step_end(sv, st->rays, st->force_store, err);
 }
 
 static void hr_destroy(rad_solver *sv)

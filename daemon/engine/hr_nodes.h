@@ -83,6 +83,16 @@ void node_stat_exchange(rad_solver *sv, uint32_t r, uint32_t s, double ff,
 int node_split_side(const rad_hier *h, uint32_t r, uint32_t s, int rcv_only);
 /* Count a stored link in s->links and its kind (links_ss ... light). */
 void node_count_link(rad_stats *s, const rad_link *l);
+/* A refinement's failure (out of memory), reported with the pool sizes. */
+rad_status node_refine_failed(const rad_solver *sv, rad_status rs,
+                              rad_error *err);
+/*
+ * End of a hierarchical step: add the threads' ray counts to the stats,
+ * report full progress, and RAD_ERR_CANCELLED when refinement was cut
+ * short by the cancel flag.
+ */
+rad_status node_step_end(rad_solver *sv, const uint64_t *rays, int cancelled,
+                         rad_error *err);
 /* Surface area of a node (0 for a light). */
 double node_area(const rad_hier *h, uint32_t t);
 #endif

@@ -51,7 +51,6 @@ typedef struct matrix_impl {
 	double *B;      /* 3 per row: current solution, lux */
 	uint64_t nnz;   /* non-zero F entries */
 	uint64_t rays;  /* shadow rays of the build, reported by step 1 */
-	double prev_residual; /* residual of the previous sweep, 0 before */
 } matrix_impl;
 
 /* Per-row results of the build, summed serially afterwards. */
@@ -325,11 +324,8 @@ static rad_status matrix_step(rad_solver *sv, rad_error *err)
 	sweep(sv, m, &change, &level);
 	rad_hier_pull(&sv->h);
 
-	double residual = level > 0 ? change / level : 0;
+	rad_solver_set_residual(sv, level > 0 ? change / level : 0);
 	rad_stats *st = &sv->stats;
-	st->residual = residual;
-	st->error_estimate = rad_error_estimate(m->prev_residual, residual);
-	m->prev_residual = residual;
 	st->links = st->links_ss = m->nnz;
 	/* The rays were traced while building, before the first sweep. */
 	st->rays = st->iteration == 0 ? m->rays : 0;

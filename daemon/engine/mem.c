@@ -123,6 +123,20 @@ void rad_mem_free(rad_mem *m, rad_mem_kind kind, void *p)
 	free(p);
 }
 
+void *rad_mem_grow(rad_mem *m, rad_mem_kind kind, void *p, size_t *cap,
+                   size_t need, size_t size, size_t first)
+{
+	if (need <= *cap)
+		return p;
+	size_t c = *cap ? *cap : first;
+	while (c < need)
+		c *= 2;
+	void *q = rad_mem_realloc(m, kind, p, c * size);
+	if (q)
+		*cap = c;
+	return q;
+}
+
 char *rad_mem_strdup(rad_mem *m, rad_mem_kind kind, const char *s)
 {
 	size_t n = strlen(s) + 1;

@@ -57,6 +57,13 @@ void *rad_mem_calloc(rad_mem *m, rad_mem_kind kind, size_t n, size_t size);
 /* On failure returns NULL and leaves p allocated and counted. */
 void *rad_mem_realloc(rad_mem *m, rad_mem_kind kind, void *p, size_t size);
 void rad_mem_free(rad_mem *m, rad_mem_kind kind, void *p);
+/*
+ * Grow array p of elements of `size` bytes so that it holds at least need:
+ * capacity doubles (from `first` when empty).  Returns the array, p itself
+ * when it is large enough, or NULL on failure (p still valid, *cap kept).
+ */
+void *rad_mem_grow(rad_mem *m, rad_mem_kind kind, void *p, size_t *cap,
+                   size_t need, size_t size, size_t first);
 char *rad_mem_strdup(rad_mem *m, rad_mem_kind kind, const char *s);
 
 /* ------------------------------------------------------------ stable pool */

@@ -117,7 +117,6 @@ typedef struct rmb_state {
 	uint32_t iter;   /* iterations done */
 	int force_store; /* cancelled: keep pairs at their level */
 	double mean_dB;  /* area-mean photopic dB after the last update */
-	double prev_residual;
 	rmb_set deleted; /* study: pairs deleted so far */
 } rmb_state;
 
@@ -128,15 +127,11 @@ typedef struct rmb_state {
 
 static rad_status vec_push(rad_solver *sv, rmb_vec *v, rmb_item it)
 {
-	if (v->n == v->cap) {
-		size_t cap = v->cap ? 2 * v->cap : 1024;
-		rmb_item *p = rad_mem_realloc(&sv->mem, RAD_MEM_SCRATCH, v->v,
-		                              cap * sizeof(*p));
-		if (!p)
-			return RAD_ERR_NOMEM;
-		v->v = p;
-		v->cap = cap;
-	}
+	rmb_item *p = rad_mem_grow(&sv->mem, RAD_MEM_SCRATCH, v->v, &v->cap,
+	                           v->n + 1, sizeof(*p), 1024);
+	if (!p)
+		return RAD_ERR_NOMEM;
+	v->v = p;
 	v->v[v->n++] = it;
 	return RAD_OK;
 }
@@ -578,14 +573,14 @@ static rad_status run_chunk(rad_solver *sv, rmb_state *st)
 {
 	rad_hier *h = &sv->h;
 	size_t n = st->cand.n < RMB_CHUNK ? st->cand.n : RMB_CHUNK;
+	rmb_item *top = rad_mem_grow(&sv->mem, RAD_MEM_SCRATCH, st->next.v,
+	                             &st->next.cap, n, sizeof(*top), 1024);
+	if (!top)
+		return RAD_ERR_NOMEM;
 	st->cand.n -= n;
-	st->next.n = 0;
-	for (size_t i = 0; i < n; i++) {
-		rad_status rs =
-		        vec_push(sv, &st->next, st->cand.v[st->cand.n + i]);
-		if (rs)
-			return rs;
-	}
+	memcpy(top, st->cand.v + st->cand.n, n * sizeof(*top));
+	st->next.v = top;
+	st->next.n = n;
 	if (n > st->eval_cap) {
 		rmb_eval *e = rad_mem_realloc(&sv->mem, RAD_MEM_SCRATCH,
 		                              st->eval, n * sizeof(*e));
@@ -728,15 +723,12 @@ static int post(rad_solver *sv, rmb_state *st, uint32_t id, rad_status *rs)
 
 static rad_status root_push(rad_solver *sv, rmb_state *st, uint32_t id)
 {
-	if (st->nroots == st->cap_roots) {
-		size_t cap = st->cap_roots ? 2 * st->cap_roots : 64;
-		uint32_t *r = rad_mem_realloc(&sv->mem, RAD_MEM_LINKS,
-		                              st->roots, cap * sizeof(*r));
-		if (!r)
-			return RAD_ERR_NOMEM;
-		st->roots = r;
-		st->cap_roots = cap;
-	}
+	uint32_t *r =
+	        rad_mem_grow(&sv->mem, RAD_MEM_LINKS, st->roots, &st->cap_roots,
+	                     st->nroots + 1, sizeof(*r), 64);
+	if (!r)
+		return RAD_ERR_NOMEM;
+	st->roots = r;
 	st->roots[st->nroots++] = id;
 	return RAD_OK;
 }
@@ -772,15 +764,12 @@ static rad_status new_root(rad_solver *sv, rmb_state *st, uint32_t r,
 	if (node_black(sv, r) && r != s)
 		return RAD_OK;
 	if (!node_black(sv, s)) {
-		if (ids->n == ids->cap) {
-			size_t cap = ids->cap ? 2 * ids->cap : 64;
-			uint32_t *v = rad_mem_realloc(&sv->mem, RAD_MEM_SCRATCH,
-			                              ids->v, cap * sizeof(*v));
-			if (!v)
-				return RAD_ERR_NOMEM;
-			ids->v = v;
-			ids->cap = cap;
-		}
+		uint32_t *v =
+		        rad_mem_grow(&sv->mem, RAD_MEM_SCRATCH, ids->v,
+		                     &ids->cap, ids->n + 1, sizeof(*v), 64);
+		if (!v)
+			return RAD_ERR_NOMEM;
+		ids->v = v;
 		it.link = rad_link_new(&sv->h, r, s, 0, 0);
 		if (it.link == RAD_NONE)
 			return RAD_ERR_NOMEM;
@@ -976,11 +965,7 @@ static rad_status rmb_step(rad_solver *sv, rad_error *err)
 	rad_status rs = st->iter == 0 ? first_walk(sv, st) : next_walk(sv, st);
 	release_scratch(sv, st);
 	if (rs)
-		return rad_fail(err, rs,
-		                "rmb: refinement ran out of memory "
-		                "(%u elements, %u links)",
-		                rad_pool_live(&h->elems),
-		                rad_pool_live(&h->links));
+		return node_refine_failed(sv, rs, err);
 	rad_solver_progress(sv, 0.9);
 	push_acc acc = {0, 0};
 	rad_hier_push(h, update_leaf, &acc);
@@ -988,18 +973,9 @@ static rad_status rmb_step(rad_solver *sv, rad_error *err)
 	st->iter++;
 	st->mean_dB = acc.change / sv->scene->total_area;
 	double r = acc.total > 0 ? acc.change / acc.total : 0;
-	sv->stats.residual = r;
-	sv->stats.error_estimate = rad_error_estimate(st->prev_residual, r);
-	st->prev_residual = r;
-	for (int t = 0; t < threads; t++)
-		sv->stats.rays += st->rays[t];
+	rad_solver_set_residual(sv, r);
 	count_links(sv);
-	rad_solver_progress(sv, 1.0);
-	if (st->force_store)
-		return rad_fail(err, RAD_ERR_CANCELLED,
-		                "cancelled during refinement; the solution "
-		                "is consistent at the level reached");
-	return RAD_OK;
+	return node_step_end(sv, st->rays, st->force_store, err);
 }
 
 static void rmb_destroy(rad_solver *sv)

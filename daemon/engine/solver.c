@@ -64,6 +64,13 @@ double rad_error_estimate(double r_prev, double r_now)
 	return r_now * q / (1.0 - q);
 }
 
+void rad_solver_set_residual(rad_solver *sv, double r)
+{
+	sv->stats.residual = r;
+	sv->stats.error_estimate = rad_error_estimate(sv->prev_residual, r);
+	sv->prev_residual = r;
+}
+
 static rad_status check_options(const rad_options *o, rad_error *err)
 {
 	if ((unsigned)o->solver >= RAD_SOLVER_NKINDS)

@@ -28,10 +28,11 @@ struct rad_solver {
 	rad_hier h;   /* elements, clusters, links */
 	rad_par *par; /* worker threads */
 	const rad_solver_ops *ops;
-	void *impl;        /* solver-private state, counted in mem */
-	rad_stats stats;   /* published after each step */
-	double flux_scale; /* photopic flux of all sources (lm), > 0 */
-	double tol;        /* convergence tolerance for error_estimate */
+	void *impl;           /* solver-private state, counted in mem */
+	rad_stats stats;      /* published after each step */
+	double flux_scale;    /* photopic flux of all sources (lm), > 0 */
+	double tol;           /* convergence tolerance for error_estimate */
+	double prev_residual; /* residual of the previous step, 0 before */
 };
 
 extern const rad_solver_ops rad_solver_matrix_ops;
@@ -57,5 +58,7 @@ static inline void rad_solver_progress(const rad_solver *sv, double f)
  * linearly converging iteration: r_k q / (1 - q) with q = r_k / r_{k-1}.
  */
 double rad_error_estimate(double r_prev, double r_now);
+/* Publish a step's residual and the error estimate it gives. */
+void rad_solver_set_residual(rad_solver *sv, double r);
 
 #endif

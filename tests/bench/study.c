@@ -270,6 +270,17 @@ static FILE *open_out(const study_args *a, const char *file)
 	return f;
 }
 
+static rad_scene *load_scene(const char *path)
+{
+	rad_scene *sc;
+	rad_error err;
+	if (rad_gltf_load_file(path, &sc, NULL, &err)) {
+		fprintf(stderr, "luxrad-study: %s\n", err.msg);
+		return NULL;
+	}
+	return sc;
+}
+
 static int run_study(const study_args *a)
 {
 	FILE *csv = open_out(a, "iterations.csv");
@@ -284,12 +295,9 @@ static int run_study(const study_args *a)
 	             "seconds_rmb_minimal,grid_rms_rel_minimal\n");
 	int rc = 0;
 	for (int i = 0; i < a->nscenes && !rc; i++) {
-		rad_scene *sc;
-		rad_error err;
-		if (rad_gltf_load_file(a->scenes[i], &sc, NULL, &err)) {
-			fprintf(stderr, "luxrad-study: %s\n", err.msg);
+		rad_scene *sc = load_scene(a->scenes[i]);
+		if (!sc)
 			return 1;
-		}
 		rad_scene_counts cnt;
 		rad_scene_counts_get(sc, &cnt);
 		size_t npts = (size_t)a->grid * a->grid;
@@ -365,12 +373,9 @@ static int run_trade(const study_args *a)
 	           "peak_bytes,grid_rms_rel,grid_mean,reference_mean\n");
 	int rc = 0;
 	for (int i = 0; i < a->nscenes && !rc; i++) {
-		rad_scene *sc;
-		rad_error err;
-		if (rad_gltf_load_file(a->scenes[i], &sc, NULL, &err)) {
-			fprintf(stderr, "luxrad-study: %s\n", err.msg);
+		rad_scene *sc = load_scene(a->scenes[i]);
+		if (!sc)
 			return 1;
-		}
 		const char *name = base_name(a->scenes[i]);
 		size_t npts = (size_t)a->grid * a->grid;
 		double *grid = make_grid(sc, a->grid);
