@@ -24,7 +24,6 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <time.h>
 
 #include "gltf.h"
 #include "rad.h"
@@ -479,13 +478,6 @@ typedef struct run_log {
 	int converged;
 } run_log;
 
-static double now_seconds(void)
-{
-	struct timespec ts;
-	clock_gettime(CLOCK_MONOTONIC, &ts);
-	return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
-
 static int log_push(run_log *lg, const rad_stats *st)
 {
 	if (lg->n == lg->cap) {
@@ -522,7 +514,7 @@ static int run_solver(rad_solver *sv, const cli_args *a, run_log *lg,
                       rad_error *err)
 {
 	uint32_t limit = a->iterations ? a->iterations : a->max_iter;
-	double t0 = now_seconds();
+	double t0 = rad_seconds();
 	rad_stats st = {0};
 
 	for (uint32_t i = 0; i < limit; i++) {
@@ -538,7 +530,7 @@ static int run_solver(rad_solver *sv, const cli_args *a, run_log *lg,
 		if (!a->iterations && st.converged)
 			break;
 	}
-	lg->solve_seconds = now_seconds() - t0;
+	lg->solve_seconds = rad_seconds() - t0;
 	lg->converged = st.converged;
 	return 0;
 }
@@ -780,9 +772,9 @@ static int load_scene(const char *path, rad_scene **sc, rad_gltf_info *info,
 		fprintf(stderr, "luxrad-solve: %s\n", err.msg);
 		return EXIT_SOLVE;
 	}
-	double t0 = now_seconds();
+	double t0 = rad_seconds();
 	st = rad_gltf_load(bytes, len, sc, info, &err);
-	*seconds = now_seconds() - t0;
+	*seconds = rad_seconds() - t0;
 	free(bytes);
 	if (st != RAD_OK) {
 		fprintf(stderr, "luxrad-solve: %s: %s: %s\n", path,

@@ -321,6 +321,9 @@ void rad_solver_leaves(const rad_solver *sv, rad_leaf_fn fn, void *ud);
 
 void rad_solver_free(rad_solver *sv);
 
+/* Seconds on a monotonic clock (the one the statistics are timed with). */
+double rad_seconds(void);
+
 /* Photopic weights used to turn RGB into one lux value. */
 #define RAD_LUMA_R 0.2126
 #define RAD_LUMA_G 0.7152

@@ -150,7 +150,7 @@ rad_status rad_solver_new(const rad_scene *scene, const rad_options *opt,
 	return RAD_OK;
 }
 
-static double now_seconds(void)
+double rad_seconds(void)
 {
 	struct timespec ts;
 	clock_gettime(CLOCK_MONOTONIC, &ts);
@@ -161,7 +161,7 @@ rad_status rad_solver_step(rad_solver *sv, rad_error *err)
 {
 	if (rad_solver_cancelled(sv))
 		return rad_fail(err, RAD_ERR_CANCELLED, "cancelled");
-	double t0 = now_seconds();
+	double t0 = rad_seconds();
 	uint64_t splits0 = sv->h.splits;
 	sv->stats.links_created = sv->stats.links_deleted = 0;
 	sv->stats.links_recreated = sv->stats.links_gathered = 0;
@@ -172,7 +172,7 @@ rad_status rad_solver_step(rad_solver *sv, rad_error *err)
 	if (st)
 		return st;
 	sv->stats.iteration++;
-	sv->stats.seconds = now_seconds() - t0;
+	sv->stats.seconds = rad_seconds() - t0;
 	sv->stats.seconds_total += sv->stats.seconds;
 	sv->stats.refinements = sv->h.splits - splits0;
 	sv->stats.converged = sv->stats.error_estimate <= sv->tol;

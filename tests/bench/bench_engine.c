@@ -20,7 +20,6 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <time.h>
 
 #include "gltf.h"
 #include "rad.h"
@@ -46,13 +45,6 @@ typedef struct bench_result {
 	rad_stats st; /* after the last iteration */
 	int64_t bvh_bytes;
 } bench_result;
-
-static double now_s(void)
-{
-	struct timespec ts;
-	clock_gettime(CLOCK_MONOTONIC, &ts);
-	return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
 
 static void usage(FILE *f)
 {
@@ -133,15 +125,15 @@ static int bench_load(const char *path, rad_scene **sc, bench_result *r)
 		fprintf(stderr, "luxrad-bench: %s\n", err.msg);
 		return -1;
 	}
-	double t0 = now_s();
+	double t0 = rad_seconds();
 	rad_status st = rad_gltf_load(bytes, r->file_bytes, sc, NULL, &err);
-	r->load_s = now_s() - t0;
+	r->load_s = rad_seconds() - t0;
 	free(bytes);
 	if (st == RAD_OK) {
 		rad_vis_free(*sc);
-		t0 = now_s();
+		t0 = rad_seconds();
 		st = rad_vis_build(*sc, &err);
-		r->bvh_s = now_s() - t0;
+		r->bvh_s = rad_seconds() - t0;
 	}
 	if (st != RAD_OK) {
 		fprintf(stderr, "luxrad-bench: %s: %s\n", path, err.msg);
@@ -164,7 +156,7 @@ static int bench_solve(const bench_args *a, const rad_scene *sc,
 		fprintf(stderr, "luxrad-bench: %s: %s\n", r->path, err.msg);
 		return -1;
 	}
-	double t0 = now_s();
+	double t0 = rad_seconds();
 	for (uint32_t i = 0; i < n; i++) {
 		if (rad_solver_converge(sv, a->tol, 1, &err) != RAD_OK) {
 			fprintf(stderr, "luxrad-bench: %s: %s\n", r->path,
@@ -177,7 +169,7 @@ static int bench_solve(const bench_args *a, const rad_scene *sc,
 		if (!a->iterations && r->st.converged)
 			break;
 	}
-	r->solve_s = now_s() - t0;
+	r->solve_s = rad_seconds() - t0;
 	r->converged = r->st.converged;
 	rad_solver_free(sv);
 	return 0;
