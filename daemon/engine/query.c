@@ -285,7 +285,8 @@ static void gather_cluster(gather *g, uint32_t cid)
 /* ------------------------------------------------------------- queries */
 
 typedef struct query {
-	const rad_solver *sv;
+	const rad_scene *scene;
+	const rad_hier *h;
 	const double *pts;
 	double *lux;
 	double floor;
@@ -293,8 +294,8 @@ typedef struct query {
 
 static double point_lux(const query *q, v3 x, v3 n)
 {
-	const rad_scene *s = q->sv->scene;
-	gather g = {&q->sv->h, s->vis, x, n, 0, q->floor};
+	const rad_scene *s = q->scene;
+	gather g = {q->h, s->vis, x, n, 0, q->floor};
 	for (uint32_t l = 0; l < s->nlights; l++) {
 		const rad_light *L = &s->lights[l];
 		g.total += rad_light_point(s->vis, L, x, n, NULL) *
@@ -333,11 +334,10 @@ static rad_status check_points(const double *pts, size_t n, rad_error *err)
 	return RAD_OK;
 }
 
-rad_status rad_solver_illuminance(const rad_solver *sv, const double *pts,
-                                  size_t n, double *lux, rad_error *err)
+rad_status rad_query_illuminance(const rad_scene *scene, const rad_hier *h,
+                                 rad_par *par, const double *pts, size_t n,
+                                 double *lux, rad_error *err)
 {
-	if (!sv)
-		return rad_fail(err, RAD_ERR_INVALID, "illuminance: no solver");
 	if (n > 0 && (!pts || !lux))
 		return rad_fail(err, RAD_ERR_INVALID,
 		                "illuminance: %zu points but %s is NULL", n,
@@ -345,23 +345,35 @@ rad_status rad_solver_illuminance(const rad_solver *sv, const double *pts,
 	rad_status st = check_points(pts, n, err);
 	if (st != RAD_OK || n == 0)
 		return st;
-	query q = {sv, pts, lux, 0};
-	if (sv->scene->npolys > 0)
+	query q = {scene, h, pts, lux, 0};
+	if (scene->npolys > 0)
 		q.floor = FLOOR_REL *
-		          rad_luma(rad_cluster_at(&sv->h, RAD_TAG_CLUSTER)->B);
-	rad_par_for(sv->par, n, POINT_GRAIN, query_range, &q);
+		          rad_luma(rad_cluster_at(h, RAD_TAG_CLUSTER)->B);
+	if (par)
+		rad_par_for(par, n, POINT_GRAIN, query_range, &q);
+	else
+		query_range(&q, 0, n, 0);
 	return RAD_OK;
+}
+
+rad_status rad_solver_illuminance(const rad_solver *sv, const double *pts,
+                                  size_t n, double *lux, rad_error *err)
+{
+	if (!sv)
+		return rad_fail(err, RAD_ERR_INVALID, "illuminance: no solver");
+	return rad_query_illuminance(sv->scene, &sv->h, sv->par, pts, n, lux,
+	                             err);
 }
 
 /* ---------------------------------------------------------------- leaves */
 
-static void leaves_below(const rad_solver *sv, uint32_t id, rad_leaf_fn fn,
+static void leaves_below(const rad_hier *h, uint32_t id, rad_leaf_fn fn,
                          void *ud)
 {
-	const rad_elem *e = rad_elem_at(&sv->h, id);
+	const rad_elem *e = rad_elem_at(h, id);
 	if (e->child != RAD_NONE) {
 		for (uint32_t k = 0; k < 4; k++)
-			leaves_below(sv, e->child + k, fn, ud);
+			leaves_below(h, e->child + k, fn, ud);
 		return;
 	}
 	rad_patch p;
@@ -376,13 +388,18 @@ static void leaves_below(const rad_solver *sv, uint32_t id, rad_leaf_fn fn,
 	}
 	double B[3] = {e->B[0], e->B[1], e->B[2]};
 	double I[3] = {e->I[0], e->I[1], e->I[2]};
-	fn(ud, sv->scene->polys[e->poly].node, pos, nv, B, I);
+	fn(ud, h->scene->polys[e->poly].node, pos, nv, B, I);
+}
+
+void rad_query_leaves(const rad_hier *h, rad_leaf_fn fn, void *ud)
+{
+	for (uint32_t p = 0; p < h->scene->npolys; p++)
+		leaves_below(h, p, fn, ud);
 }
 
 void rad_solver_leaves(const rad_solver *sv, rad_leaf_fn fn, void *ud)
 {
 	if (!sv || !fn)
 		return;
-	for (uint32_t p = 0; p < sv->scene->npolys; p++)
-		leaves_below(sv, p, fn, ud);
+	rad_query_leaves(&sv->h, fn, ud);
 }

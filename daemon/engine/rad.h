@@ -70,10 +70,11 @@ const char *rad_status_name(rad_status st);
 	X(ELEM_SURFACE,                                                        \
 	  "elements_surface") /* quadtree elements of polygons */              \
 	X(ELEM_CLUSTER, "elements_cluster") /* volume clusters */              \
-	X(LINKS, "links")     /* link pool (active and passive) */             \
-	X(MATRIX, "matrix")   /* the matrix solver's form factors */           \
-	X(SCRATCH, "scratch") /* per-iteration work buffers */                 \
-	X(STUDY, "study")     /* study statistics (rad_options.study) */
+	X(LINKS, "links")       /* link pool (active and passive) */           \
+	X(MATRIX, "matrix")     /* the matrix solver's form factors */         \
+	X(SCRATCH, "scratch")   /* per-iteration work buffers */               \
+	X(STUDY, "study")       /* study statistics (rad_options.study) */     \
+	X(SOLUTION, "solution") /* published copies (rad_solution) */
 
 typedef enum rad_mem_kind {
 #define RAD_MEM_ENUM_(name, str) RAD_MEM_##name,
@@ -320,6 +321,43 @@ typedef void (*rad_leaf_fn)(void *ud, uint32_t node, const double p[4][3],
 void rad_solver_leaves(const rad_solver *sv, rad_leaf_fn fn, void *ud);
 
 void rad_solver_free(rad_solver *sv);
+
+/* --------------------------------------------------------------- solution */
+/*
+ * A solution is an immutable copy of a solver's published result (the
+ * element and cluster hierarchy with its radiosity; no links).  It answers
+ * the same queries as the solver, from any number of threads at once,
+ * while the solver goes on stepping; the daemon publishes one per
+ * iteration.  It holds no threads: queries run on the caller's thread.
+ * A solution refers to its scene, which must outlive it.
+ */
+typedef struct rad_solution rad_solution;
+
+/* Copy the solver's published result (between steps). */
+rad_status rad_solution_new(const rad_solver *sv, rad_solution **out,
+                            rad_error *err);
+/* Same as rad_solver_illuminance, single-threaded. */
+rad_status rad_solution_illuminance(const rad_solution *s, const double *pts,
+                                    size_t n, double *lux, rad_error *err);
+void rad_solution_leaves(const rad_solution *s, rad_leaf_fn fn, void *ud);
+/* Iteration the solution was taken after. */
+uint32_t rad_solution_iteration(const rad_solution *s);
+/* Bytes held (kind SOLUTION). */
+void rad_solution_memory(const rad_solution *s, rad_mem_report *out);
+/*
+ * Serialize to bytes (*out malloc'ed, caller frees) and back.  Loading
+ * checks the bytes against the scene (format version, polygon count, a
+ * digest of the geometry, every id in range, finite values): bytes from
+ * another scene or a damaged file get RAD_ERR_INVALID, never a crash.
+ */
+rad_status rad_solution_save(const rad_solution *s, unsigned char **out,
+                             size_t *len, rad_error *err);
+rad_status rad_solution_load(const rad_scene *scene, const void *bytes,
+                             size_t len, rad_solution **out, rad_error *err);
+void rad_solution_free(rad_solution *s);
+
+/* Name of a scene node (glTF node / mesh), "" when it has none. */
+const char *rad_scene_node_name(const rad_scene *s, uint32_t node);
 
 /* Seconds on a monotonic clock (the one the statistics are timed with). */
 double rad_seconds(void);

@@ -61,4 +61,13 @@ double rad_error_estimate(double r_prev, double r_now);
 /* Publish a step's residual and the error estimate it gives. */
 void rad_solver_set_residual(rad_solver *sv, double r);
 
+/*
+ * Queries over any hierarchy (query.c): a solver's own, or a published
+ * solution's (solution.c).  par NULL runs on the caller's thread.
+ */
+rad_status rad_query_illuminance(const rad_scene *scene, const rad_hier *h,
+                                 rad_par *par, const double *pts, size_t n,
+                                 double *lux, rad_error *err);
+void rad_query_leaves(const rad_hier *h, rad_leaf_fn fn, void *ud);
+
 #endif
