@@ -24,7 +24,10 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
+#include "export.h"
 #include "gltf.h"
 #include "rad.h"
 
@@ -43,6 +46,7 @@ enum { EXIT_OKAY = 0, EXIT_SOLVE = 1, EXIT_USAGE = 2 };
 typedef struct cli_args {
 	const char *scene_path;
 	const char *points_path; /* NULL: no illuminance queries */
+	const char *export_path; /* NULL: no solved-mesh export */
 	rad_options opt;
 	uint32_t iterations; /* > 0: exactly this many steps */
 	double tol;          /* converge mode: error_estimate target */
@@ -97,6 +101,8 @@ static const cli_option cli_options[] = {
          "worker threads, 0..256; 0 = one per core"},
         {"points", "FILE", OPT_STRING, ARG(points_path), 0, 0, 0, 0,
          "query illuminance at the points in FILE"},
+        {"export", "FILE", OPT_STRING, ARG(export_path), 0, 0, 0, 0,
+         "write the solved mesh to FILE (.glb; .gltf for JSON)"},
         {"json", NULL, OPT_FLAG_ON, ARG(json), 0, 0, 0, 0,
          "print one JSON object on stdout instead of the report"},
         {"per-iteration", NULL, OPT_FLAG_ON, ARG(per_iteration), 0, 0, 0, 0,
@@ -784,6 +790,80 @@ static int load_scene(const char *path, rad_scene **sc, rad_gltf_info *info,
 	return EXIT_OKAY;
 }
 
+/* ---------------------------------------------------------------- export */
+
+/* Write buf to path atomically: a temporary beside it, fsync, rename. */
+static int write_file_atomic(const char *path, const void *buf, size_t len)
+{
+	size_t n = strlen(path) + 8;
+	char *tmp = malloc(n);
+	const unsigned char *p = buf;
+	int fd = -1, made = 0;
+	const char *why = "out of memory";
+	if (!tmp)
+		goto bad;
+	snprintf(tmp, n, "%s.XXXXXX", path);
+	if ((fd = mkstemp(tmp)) < 0)
+		goto bad_errno;
+	made = 1;
+	mode_t um = umask(0); /* mkstemp makes 0600: use the usual mode */
+	umask(um);
+	if (fchmod(fd, 0666 & ~um) < 0)
+		goto bad_errno;
+	while (len > 0) {
+		ssize_t w = write(fd, p, len);
+		if (w < 0 && errno == EINTR)
+			continue;
+		if (w <= 0)
+			goto bad_errno;
+		p += w;
+		len -= (size_t)w;
+	}
+	if (fsync(fd) < 0)
+		goto bad_errno;
+	int rc = close(fd);
+	fd = -1;
+	if (rc < 0 || rename(tmp, path) < 0)
+		goto bad_errno;
+	free(tmp);
+	return EXIT_OKAY;
+bad_errno:
+	why = strerror(errno);
+bad:
+	fprintf(stderr, "luxrad-solve: cannot write %s: %s\n", path, why);
+	if (fd >= 0)
+		close(fd);
+	if (made)
+		unlink(tmp);
+	free(tmp);
+	return EXIT_SOLVE;
+}
+
+/* --export: the solved mesh as GLB (or .gltf JSON, by the extension). */
+static int export_mesh(const char *path, const rad_scene *sc,
+                       const rad_solver *sv, rad_export_info *info)
+{
+	rad_solution *sol = NULL;
+	rad_error err = {0};
+	rad_export_opts o;
+	unsigned char *out = NULL;
+	size_t len = 0, n = strlen(path);
+
+	rad_export_opts_default(&o);
+	if (n >= 5 && strcmp(path + n - 5, ".gltf") == 0)
+		o.format = RAD_GLTF_JSON;
+	if (rad_solution_new(sv, &sol, &err) != RAD_OK)
+		return engine_error("export", &err);
+	rad_status st =
+	        rad_export_solution(sc, sol, &o, &out, &len, info, &err);
+	rad_solution_free(sol);
+	if (st != RAD_OK)
+		return engine_error("export", &err);
+	int rc = write_file_atomic(path, out, len);
+	free(out);
+	return rc;
+}
+
 /* Solve the loaded scene, query the points and print the report. */
 static int solve_and_report(const cli_args *a, const rad_scene *sc,
                             const rad_gltf_info *info, const point_list *pl,
@@ -794,6 +874,7 @@ static int solve_and_report(const cli_args *a, const rad_scene *sc,
 	run_log lg = {.load_seconds = load_seconds};
 	rad_scene_counts counts;
 	rad_stats final;
+	rad_export_info xinfo;
 	double *lux = calloc(pl->n ? pl->n : 1, sizeof(double));
 	int rc = EXIT_SOLVE;
 
@@ -805,6 +886,9 @@ static int solve_and_report(const cli_args *a, const rad_scene *sc,
 		rc = engine_error("cannot make the solver", &err);
 	} else if (run_solver(sv, a, &lg, &err) != 0) {
 		rc = engine_error("solve failed", &err);
+	} else if (a->export_path &&
+	           export_mesh(a->export_path, sc, sv, &xinfo) != EXIT_OKAY) {
+		rc = EXIT_SOLVE;
 	} else if (pl->n && rad_solver_illuminance(sv, pl->xyz, pl->n, lux,
 	                                           &err) != RAD_OK) {
 		rc = engine_error("illuminance query failed", &err);
@@ -824,6 +908,13 @@ static int solve_and_report(const cli_args *a, const rad_scene *sc,
 			rc = print_json(&r);
 		} else {
 			print_text(&r);
+			if (a->export_path)
+				printf("\nexported %s: %zu meshes, %zu "
+				       "vertices, "
+				       "%zu triangles (white point %.6g lux)\n",
+				       a->export_path, xinfo.meshes,
+				       xinfo.vertices, xinfo.triangles,
+				       xinfo.white_lux);
 			rc = EXIT_OKAY;
 		}
 		if (!lg.converged && !a->iterations)

@@ -59,6 +59,39 @@ as_root() {
 	fi
 }
 
+# The Khronos glTF validator (npm package gltf-validator) for the export
+# tests: installed into tests/tools/node_modules, exactly the version that
+# tests/tools/package-lock.json pins, with `npm ci` (no global install, no
+# root).  Skipped when that version is already there, so a second run
+# touches no network.
+# The gltf-validator version installed under $1/node_modules, or "".
+pinned_have() {
+	node -p "require(process.argv[1]).version" \
+		"$1/node_modules/gltf-validator/package.json" 2>/dev/null || true
+}
+
+install_validator() {
+	local dir want have
+	dir="$(cd "$(dirname "$0")/.." && pwd)/tests/tools"
+	want=$(node -p "require(process.argv[1]).packages['node_modules/gltf-validator'].version" \
+		"$dir/package-lock.json") || {
+		log "cannot read the pinned gltf-validator version from $dir/package-lock.json"
+		exit 1
+	}
+	have=$(pinned_have "$dir")
+	if [[ $have == "$want" ]]; then
+		log "gltf-validator $want present"
+		return 0
+	fi
+	log "installing gltf-validator $want into $dir/node_modules"
+	npm ci --prefix "$dir" --no-audit --no-fund --loglevel=error
+	have=$(pinned_have "$dir")
+	if [[ $have != "$want" ]]; then
+		log "gltf-validator $want still missing after npm ci"
+		exit 1
+	fi
+}
+
 main() {
 	local missing=() p
 	for p in "${PACKAGES[@]}"; do
@@ -66,6 +99,7 @@ main() {
 	done
 	if [[ ${#missing[@]} -eq 0 ]]; then
 		log "all ${#PACKAGES[@]} packages present"
+		install_validator
 		return 0
 	fi
 	log "installing: ${missing[*]}"
@@ -80,6 +114,7 @@ main() {
 			exit 1
 		fi
 	done
+	install_validator
 	log "done"
 }
 

@@ -34,6 +34,7 @@
  */
 #include <tiny_gltf.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdarg>
 #include <cstdint>
@@ -62,6 +63,8 @@ const uint32_t kGlbBin = 0x004E4942;  /* "BIN\0" */
 const int kMaxJsonDepth = 64; /* real glTF nests < 10; see check_depth */
 const char kLightsExt[] = "KHR_lights_punctual";
 const char kStrengthExt[] = "KHR_materials_emissive_strength";
+const char kSensorPrefix[] = "sensor:";      /* node name declaring one */
+const char kSensorExtra[] = "luxrad_sensor"; /* or this key in extras */
 
 /* ------------------------------------------------------------ messages */
 
@@ -392,6 +395,9 @@ struct Loader {
 	std::vector<int64_t> mat_ids; /* [glTF material + 1]: id, or -1 */
 	std::vector<double> batch;    /* triangles waiting for the builder */
 	uint64_t triangles;           /* offered so far (counts are 32-bit) */
+	/* rad_gltf_sensors: collect sensor nodes here instead of building */
+	std::vector<rad_gltf_sensor> *sensors = nullptr;
+	std::map<std::string, int> sensor_node{}; /* name -> declaring node */
 };
 
 const char *node_name(const Loader &L, int ni)
@@ -948,10 +954,100 @@ rad_status add_light(Loader &L, int ni, int li, const Mat4 &w)
 	return blame(L.err, rad_scene_add_light(L.s, &d, L.err), label);
 }
 
+/* ------------------------------------------------------------- sensors */
+
+/* The sensor name node ni declares ("" = none), checked. */
+rad_status sensor_name(const Loader &L, int ni, std::string *name)
+{
+	const tinygltf::Node &n = L.m.nodes[(size_t)ni];
+	const size_t plen = sizeof kSensorPrefix - 1;
+	bool named = n.name.compare(0, plen, kSensorPrefix) == 0;
+	bool tagged = n.extras.IsObject() && n.extras.Has(kSensorExtra);
+	std::string by_name = named ? n.name.substr(plen) : std::string();
+	if (tagged) {
+		const tinygltf::Value &v = n.extras.Get(kSensorExtra);
+		if (!v.IsString())
+			return rad_fail(L.err, RAD_ERR_INVALID,
+			                "node %d '%s': extras.%s must be a "
+			                "string (the sensor's name)",
+			                ni, node_name(L, ni), kSensorExtra);
+		*name = v.Get<std::string>();
+		if (named && by_name != *name)
+			return rad_fail(L.err, RAD_ERR_INVALID,
+			                "node %d '%s': declares sensor '%s' by "
+			                "its name and '%s' in extras.%s",
+			                ni, node_name(L, ni), by_name.c_str(),
+			                name->c_str(), kSensorExtra);
+	} else {
+		*name = by_name;
+	}
+	if ((named || tagged) && name->empty())
+		return rad_fail(L.err, RAD_ERR_INVALID,
+		                "node %d '%s': empty sensor name", ni,
+		                node_name(L, ni));
+	if (name->size() >= RAD_GLTF_SENSOR_NAME_MAX)
+		return rad_fail(L.err, RAD_ERR_INVALID,
+		                "node %d: sensor name of %zu bytes (at most "
+		                "%d)",
+		                ni, name->size(), RAD_GLTF_SENSOR_NAME_MAX - 1);
+	for (unsigned char ch : *name)
+		if (ch < 0x20 || ch == 0x7F)
+			return rad_fail(L.err, RAD_ERR_INVALID,
+			                "node %d: sensor name has a control "
+			                "character",
+			                ni);
+	return RAD_OK;
+}
+
+/* A sensor at the node's origin, facing its +Y axis (glTF's up). */
+rad_status visit_sensor(Loader &L, int ni, const Mat4 &w)
+{
+	std::string name;
+	rad_status st = sensor_name(L, ni, &name);
+	if (st != RAD_OK || name.empty())
+		return st;
+	rad_gltf_sensor g = {};
+	memcpy(g.name, name.c_str(), name.size() + 1);
+	g.node = (uint32_t)ni;
+	/* Scaled by the largest component first: a huge but finite axis
+	 * must not overflow into an infinite length. */
+	double big = std::max(std::fabs(w.m[4]),
+	                      std::max(std::fabs(w.m[5]), std::fabs(w.m[6])));
+	double len = 0;
+	for (int k = 0; k < 3; k++) {
+		g.position[k] = w.m[12 + k];
+		if (!std::isfinite(g.position[k]))
+			return rad_fail(
+			        L.err, RAD_ERR_INVALID,
+			        "sensor '%s' (node %d): position is not "
+			        "finite",
+			        g.name, ni);
+		g.normal[k] = big > 0 ? w.m[4 + k] / big : 0;
+		len += g.normal[k] * g.normal[k];
+	}
+	if (!(big > 0) || !std::isfinite(big))
+		return rad_fail(L.err, RAD_ERR_INVALID,
+		                "sensor '%s' (node %d): normal (the node's +Y "
+		                "axis in world space) is %s",
+		                g.name, ni, big == 0 ? "zero" : "not finite");
+	len = std::sqrt(len);
+	for (double &c : g.normal)
+		c /= len;
+	auto seen = L.sensor_node.emplace(name, ni);
+	if (!seen.second)
+		return rad_fail(L.err, RAD_ERR_INVALID,
+		                "sensor '%s' declared twice (nodes %d and %d)",
+		                g.name, seen.first->second, ni);
+	L.sensors->push_back(g);
+	return RAD_OK;
+}
+
 /* ------------------------------------------------------------- scenes */
 
 rad_status visit_node(Loader &L, int ni, const Mat4 &w)
 {
+	if (L.sensors)
+		return visit_sensor(L, ni, w);
 	int li;
 	rad_status st = node_light(L, ni, &li);
 	if (L.info)
@@ -1115,6 +1211,74 @@ extern "C" rad_status rad_gltf_load(const void *bytes, size_t len,
 	}
 	*out = s;
 	return RAD_OK;
+}
+
+/* ------------------------------------------------------ sensor nodes */
+
+namespace
+{
+
+rad_status find_sensors(const unsigned char *b, size_t len,
+                        std::vector<rad_gltf_sensor> *out, rad_error *err)
+{
+	tinygltf::Model m;
+	rad_status st = parse(b, len, m, nullptr, err);
+	if (st == RAD_OK)
+		st = check_required(m, err);
+	if (st != RAD_OK)
+		return st;
+	Loader L = {m, nullptr, nullptr, err, {}, {}, 0, out};
+	return walk_scene(L);
+}
+
+} // namespace
+
+extern "C" rad_status rad_gltf_sensors(const void *bytes, size_t len,
+                                       rad_gltf_sensor **out, size_t *n,
+                                       rad_error *err)
+{
+	rad_error_clear(err);
+	if (!out || !n)
+		return rad_fail(err, RAD_ERR_INVALID,
+		                "rad_gltf_sensors: no out");
+	*out = nullptr;
+	*n = 0;
+	if (!bytes || len == 0)
+		return rad_fail(err, RAD_ERR_INVALID,
+		                "empty input: no glTF bytes");
+	if (len > UINT32_MAX)
+		return rad_fail(err, RAD_ERR_UNSUPPORTED,
+		                "input of %zu bytes: glTF over 4 GiB is not "
+		                "supported",
+		                len);
+	std::vector<rad_gltf_sensor> v;
+	rad_status st;
+	try {
+		st = find_sensors(static_cast<const unsigned char *>(bytes),
+		                  len, &v, err);
+	} catch (const std::bad_alloc &) {
+		st = rad_fail(err, RAD_ERR_NOMEM,
+		              "out of memory while reading glTF sensors");
+	} catch (const std::exception &e) {
+		st = rad_fail(err, RAD_ERR_INVALID, "malformed glTF: %s",
+		              e.what());
+	} catch (...) {
+		st = rad_fail(err, RAD_ERR_INVALID, "malformed glTF");
+	}
+	if (st != RAD_OK || v.empty())
+		return st;
+	*out = static_cast<rad_gltf_sensor *>(malloc(v.size() * sizeof v[0]));
+	if (!*out)
+		return rad_fail(err, RAD_ERR_NOMEM,
+		                "out of memory for %zu sensors", v.size());
+	memcpy(*out, v.data(), v.size() * sizeof v[0]);
+	*n = v.size();
+	return RAD_OK;
+}
+
+extern "C" void rad_gltf_sensors_free(rad_gltf_sensor *s)
+{
+	free(s);
 }
 
 /* -------------------------------------------------------------- export */

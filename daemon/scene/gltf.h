@@ -54,6 +54,40 @@ rad_status rad_file_read(const char *path, unsigned char **out, size_t *len,
 rad_status rad_gltf_load_file(const char *path, rad_scene **out,
                               rad_gltf_info *info, rad_error *err);
 
+/*
+ * Sensors: the points where the daemon publishes illuminance (Modbus).  A
+ * node declares one by its name, "sensor:<name>", or by its extras,
+ * {"luxrad_sensor": "<name>"} (both on one node must agree).  The sensor
+ * sits at the node's world-space origin and faces the node's +Y axis in
+ * world space (glTF's up: an untransformed sensor node measures on a
+ * floor facing up), normalised; under a non-uniform scale that is the
+ * image of the axis, not the normal of the node's XZ plane.  Nodes are
+ * taken from the default scene as rad_gltf_load walks it; a sensor node
+ * may also carry a mesh, which is then geometry as usual.
+ */
+#define RAD_GLTF_SENSOR_NAME_MAX 64 /* bytes with the NUL */
+
+typedef struct rad_gltf_sensor {
+	char name[RAD_GLTF_SENSOR_NAME_MAX]; /* non-empty, no control chars */
+	double position[3];                  /* metres, world space */
+	double normal[3];                    /* world space, unit length */
+	uint32_t node;                       /* glTF node index */
+} rad_gltf_sensor;
+
+/*
+ * Every sensor of the document, in the walk's order (depth first, roots
+ * in scene order).  *out is malloc'ed (NULL when there is none), freed
+ * with rad_gltf_sensors_free.  RAD_ERR_INVALID names the node for an
+ * empty, too long or duplicate name, conflicting declarations, a
+ * non-string extras.luxrad_sensor, a zero or non-finite normal or a
+ * non-finite position, and for every error rad_gltf_load would report
+ * on the document's parsing or node hierarchy.  Parses the whole
+ * document again (the scene's load does not keep it).
+ */
+rad_status rad_gltf_sensors(const void *bytes, size_t len,
+                            rad_gltf_sensor **out, size_t *n, rad_error *err);
+void rad_gltf_sensors_free(rad_gltf_sensor *s);
+
 typedef struct rad_gltf_mesh {
 	const char *name;      /* node and mesh name; may be NULL */
 	const float *position; /* 3 floats per vertex */

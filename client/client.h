@@ -1,0 +1,215 @@
+/*
+ * client.h -- the luxrad CLI's shared types: parsed command lines, the
+ * connection to the daemon, exit codes, and the command functions each
+ * file implements.
+ *
+ * Module map:
+ *   luxrad.c   main: option table, argv parsing, --help texts, dispatch
+ *   net.c      the connection: connect, hello, requests, frames
+ *   cmds.c     scenes, jobs and daemon commands (submit, create, run...)
+ *   query.c    query (points file, grid, surfaces) and export
+ *   watch.c    watch and run --wait: events, progress bar, JSON lines
+ *
+ * The CLI is thin on purpose: it checks what it can check locally
+ * (syntax, numbers, files) and leaves every semantic decision (ranges,
+ * states) to the daemon, whose error it reports verbatim.
+ */
+#ifndef LUXRAD_CLIENT_H
+#define LUXRAD_CLIENT_H
+
+#include <jansson.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <stdio.h>
+
+#include "rp.h"
+
+#define LX_VERSION "0.1.0"
+#define LX_DEFAULT_CONNECT "127.0.0.1:7420"
+/* Replies may be much larger than requests (a grid with its points): the
+ * client trusts its daemon further than the daemon trusts a client. */
+#define LX_MAX_REPLY_HEADER ((size_t)256 << 20)
+
+/* Exit codes (documented in --help). */
+enum {
+	LX_EXIT_OK = 0,
+	LX_EXIT_DAEMON =
+	        1,         /* the daemon returned an error; output unwritable */
+	LX_EXIT_USAGE = 2, /* bad command line or input file */
+	LX_EXIT_CONN = 3,  /* cannot connect, connection lost */
+	LX_EXIT_JOB = 4    /* run --wait / watch: job failed or cancelled */
+};
+
+/*
+ * Every option, listed once: id, long name, takes a value, value name,
+ * help.  Which command accepts which is said by the command table.
+ */
+#define LX_OPTIONS(X)                                                          \
+	X(HELP, "help", 0, NULL, "show help for the command")                  \
+	X(JSON, "json", 0, NULL, "print the daemon's reply objects as JSON")   \
+	X(CONNECT, "connect", 1, "ADDR",                                       \
+	  "daemon address [$LUXRAD_CONNECT, 127.0.0.1:7420]")                  \
+	X(TOKEN_FILE, "token-file", 1, "FILE",                                 \
+	  "token [$LUXRAD_TOKEN_FILE, $LUXRAD_TOKEN]")                         \
+	X(NAME, "name", 1, "NAME", "a name for the scene or job")              \
+	X(SOLVE, "solve", 0, NULL,                                             \
+	  "also create a job and run it to convergence")                       \
+	X(SOLVER, "solver", 1, "S", "hr | rmb | matrix | progressive [hr]")    \
+	X(EPS, "eps", 1, "E", "refinement threshold, > 0 [1e-4]")              \
+	X(ORACLE, "oracle", 1, "O", "refinement test: bfa | bf | f [bfa]")     \
+	X(VARIATION, "variation", 1, "V",                                      \
+	  "hr, rmb: receiver accuracy, fraction of mean radiosity [0.5]")      \
+	X(NO_CLUSTERING, "no-clustering", 0, NULL,                             \
+	  "hr, rmb: no volume clusters")                                       \
+	X(MINIMAL_STORE, "minimal-store", 0, NULL,                             \
+	  "rmb: the report's link criterion alone")                            \
+	X(STUDY, "study", 0, NULL, "count re-created links (costs memory)")    \
+	X(MIN_EDGE, "min-edge", 1, "X",                                        \
+	  "smallest element edge, fraction of the diagonal [0.005]")           \
+	X(MESH_EDGE, "mesh-edge", 1, "X",                                      \
+	  "matrix/progressive mesh edge, fraction of the diagonal [0.05]")     \
+	X(RCV_SAMPLES, "rcv-samples", 1, "N",                                  \
+	  "receiver points per form factor, 1..16 [4]")                        \
+	X(VIS_SAMPLES, "vis-samples", 1, "N",                                  \
+	  "shadow rays per receiver point, 1..16 [4]")                         \
+	X(TOL, "tol", 1, "T", "convergence tolerance on the error [1e-3]")     \
+	X(MAX_ITERATIONS, "max-iterations", 1, "N",                            \
+	  "iteration cap when converging [100]")                               \
+	X(THREADS, "threads", 1, "N", "engine threads, 0 = daemon default")    \
+	X(ITERATIONS, "iterations", 1, "N", "run N more iterations")           \
+	X(CONVERGE, "converge", 0, NULL, "run until converged (the default)")  \
+	X(SECONDS, "seconds", 1, "T", "run for a budget of T seconds")         \
+	X(WAIT, "wait", 0, NULL, "block until the job stops running")          \
+	X(POINTS, "points", 1, "FILE", "illuminance at the points in FILE")    \
+	X(GRID, "grid", 0, NULL, "illuminance on a calculation grid")          \
+	X(SURFACES, "surfaces", 0, NULL, "illuminance per surface (node)")     \
+	X(ORIGIN, "origin", 1, "X,Y,Z", "grid: a corner of the rectangle")     \
+	X(U, "u", 1, "X,Y,Z", "grid: first side, from the origin")             \
+	X(V, "v", 1, "X,Y,Z", "grid: second side, from the origin")            \
+	X(SPACING, "spacing", 1, "P",                                          \
+	  "grid: point spacing in metres [EN 12464-1]")                        \
+	X(NORMAL, "normal", 1, "X,Y,Z", "grid: surface normal [u x v]")        \
+	X(OUTPUT, "output", 1, "FILE", "export: the GLB file to write (-o)")
+
+typedef enum lx_opt {
+#define LX_OPT_ENUM_(id, name, arg, meta, help) LX_OPT_##id,
+	LX_OPTIONS(LX_OPT_ENUM_)
+#undef LX_OPT_ENUM_
+	        LX_OPT_COUNT
+} lx_opt;
+
+#define LX_BIT(o) ((uint64_t)1 << LX_OPT_##o)
+
+/* The connection to the daemon (net.c). */
+typedef struct lx_conn {
+	int fd;               /* -1 when closed */
+	unsigned char *buf;   /* receive buffer */
+	size_t off, len, cap; /* consumed / filled / allocated */
+	size_t pending; /* bytes of the last frame, consumed on next read */
+	rp_limits lim;
+	long long next_id;
+	char where[300]; /* the address, for messages */
+	json_t *hello;   /* the hello reply (limits, capabilities) */
+} lx_conn;
+
+typedef struct lx_ctx {
+	const char *cmd;               /* the command name */
+	const char *val[LX_OPT_COUNT]; /* option values (last one wins) */
+	int given[LX_OPT_COUNT];       /* times each option was given */
+	char **pos;                    /* positional arguments */
+	int npos;
+	int json; /* --json */
+	lx_conn conn;
+	int connected;
+} lx_ctx;
+
+/* An event seen while waiting for a reply (or in a watch loop). */
+typedef void (*lx_event_fn)(void *ud, json_t *event);
+
+/* ---------------------------------------------------------------- net.c */
+
+/*
+ * Connect (address from --connect, $LUXRAD_CONNECT, default) and say
+ * hello (token from --token-file, $LUXRAD_TOKEN_FILE, $LUXRAD_TOKEN).
+ * Returns an exit code; messages printed.
+ */
+int lx_open(lx_ctx *cx);
+void lx_close(lx_ctx *cx);
+
+/*
+ * Send a request (an "id" is added; payload may be NULL) and wait for its
+ * reply; events arriving meanwhile go to on_event (or are ignored).  On
+ * success *reply is the reply (caller decrefs) and, if the reply has a
+ * payload, *rpayload / *rlen point into the connection's buffer until the
+ * next call.  Returns LX_EXIT_OK, LX_EXIT_DAEMON (error printed as
+ * "luxrad: <code>: <message>"; *reply still set, for --json) or
+ * LX_EXIT_CONN.
+ */
+int lx_request(lx_ctx *cx, json_t *req, const void *payload, size_t plen,
+               json_t **reply, const unsigned char **rpayload, size_t *rlen,
+               lx_event_fn on_event, void *ud);
+/* The common case: no payloads, events ignored.  req is stolen. */
+int lx_call(lx_ctx *cx, json_t *req, json_t **reply);
+/*
+ * Wait for the next frame that is an event (replies are not expected
+ * here: one is a protocol error).  Returns LX_EXIT_OK with *event set, or
+ * LX_EXIT_CONN / LX_EXIT_DAEMON (an unsolicited error, printed).
+ */
+int lx_next_event(lx_ctx *cx, json_t **event);
+
+/* --------------------------------------------------------- luxrad.c */
+
+/* Print "luxrad: <message>" and a hint, return LX_EXIT_USAGE. */
+int lx_usage_error(const lx_ctx *cx, const char *fmt, ...)
+        __attribute__((format(printf, 2, 3)));
+/* Parse option o as a finite double / an integer in [lo, hi]; 1 absent,
+ * 0 parsed, -1 usage error printed. */
+int lx_opt_double(const lx_ctx *cx, lx_opt o, double *out);
+int lx_opt_int(const lx_ctx *cx, lx_opt o, long long lo, long long hi,
+               long long *out);
+/* Parse "x,y,z"; -1 usage error printed. */
+int lx_opt_vec3(const lx_ctx *cx, lx_opt o, double out[3]);
+/* Positional argument i as a positive id ("job" / "scene" in messages). */
+int lx_pos_id(const lx_ctx *cx, int i, const char *what, long long *out);
+/* Print a JSON value on stdout, one line. */
+void lx_print_json(const json_t *v);
+/* Human-readable bytes ("70.5 KiB"). */
+const char *lx_fmt_bytes(double bytes, char *buf, size_t len);
+
+/* ------------------------------------------------------------- commands */
+
+int lx_cmd_submit(lx_ctx *cx);
+int lx_cmd_scenes(lx_ctx *cx);
+int lx_cmd_jobs(lx_ctx *cx);
+int lx_cmd_create(lx_ctx *cx);
+int lx_cmd_run(lx_ctx *cx);
+int lx_cmd_control(lx_ctx *cx); /* pause, resume, cancel */
+int lx_cmd_set(lx_ctx *cx);
+int lx_cmd_delete(lx_ctx *cx); /* delete-job, delete-scene */
+int lx_cmd_info(lx_ctx *cx);
+int lx_cmd_status(lx_ctx *cx);
+int lx_cmd_shutdown(lx_ctx *cx);
+int lx_cmd_watch(lx_ctx *cx);
+int lx_cmd_query(lx_ctx *cx);
+int lx_cmd_export(lx_ctx *cx);
+
+/* Build job.create's "options" from the command line; -1 usage error. */
+int lx_job_options(lx_ctx *cx, json_t *req);
+
+/*
+ * watch.c: having subscribed to job (its current state given), show its
+ * events until it is neither queued nor running.  live: where to draw
+ * the progress bar and statistics lines (a terminal), or NULL; json_lines:
+ * print each event as a JSON line on stdout.  final_state receives the
+ * last state.  Returns an exit code (LX_EXIT_JOB when the job failed or
+ * was cancelled, LX_EXIT_CONN when the connection was lost).
+ */
+int lx_follow_job(lx_ctx *cx, long long job, const char *state, FILE *live,
+                  int json_lines, char *final_state, size_t fslen);
+/* Exit code for a final state. */
+int lx_state_exit(const char *state);
+
+/* query.c: the points file format of luxrad-solve --points. */
+int lx_points_load(const char *path, json_t **points, size_t *n);
+
+#endif

@@ -1,0 +1,482 @@
+/*
+ * luxrad.c -- the luxrad command-line client: argv parsing, --help texts
+ * and dispatch to the command functions (cmds.c, query.c, watch.c).
+ *
+ * Every option is declared once (LX_OPTIONS in client.h); each command
+ * says which options it takes, how many positional arguments, and its
+ * help text with examples.  Parsing only collects strings: each command
+ * converts and checks its own values, so a bad number is reported with
+ * the option's name, and nothing reaches the daemon that does not parse.
+ */
+#include <errno.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "client.h"
+
+static const struct {
+	const char *name, *meta, *help;
+	int arg;
+} opt_table[LX_OPT_COUNT] = {
+#define LX_OPT_ROW_(id, name, arg, meta, help) {name, meta, help, arg},
+        LX_OPTIONS(LX_OPT_ROW_)
+#undef LX_OPT_ROW_
+};
+
+#define GLOBAL_OPTS                                                            \
+	(LX_BIT(HELP) | LX_BIT(JSON) | LX_BIT(CONNECT) | LX_BIT(TOKEN_FILE))
+#define CREATE_OPTS                                                            \
+	(LX_BIT(NAME) | LX_BIT(SOLVER) | LX_BIT(EPS) | LX_BIT(ORACLE) |        \
+	 LX_BIT(VARIATION) | LX_BIT(NO_CLUSTERING) | LX_BIT(MINIMAL_STORE) |   \
+	 LX_BIT(STUDY) | LX_BIT(MIN_EDGE) | LX_BIT(MESH_EDGE) |                \
+	 LX_BIT(RCV_SAMPLES) | LX_BIT(VIS_SAMPLES) | LX_BIT(TOL) |             \
+	 LX_BIT(MAX_ITERATIONS) | LX_BIT(THREADS))
+
+typedef struct cmd_def {
+	const char *name;
+	int (*fn)(lx_ctx *cx);
+	int npos;          /* positional arguments required (exactly) */
+	uint64_t opts;     /* accepted options besides the global ones */
+	const char *usage; /* after "luxrad NAME" */
+	const char *summary;
+	const char *text; /* details and examples */
+} cmd_def;
+
+static const cmd_def commands[] = {
+        {"submit", lx_cmd_submit, 1, CREATE_OPTS | LX_BIT(SOLVE),
+         "FILE [--name N] [--solve [create options]]",
+         "upload a .gltf/.glb scene; prints the scene id",
+         "With --solve, also creates a job (create options apply) and runs "
+         "it to\nconvergence in the background; prints the job id instead. "
+         "--json prints\neach reply (upload, create, run) as one JSON "
+         "line.\n\nExamples:\n  luxrad submit scenes/cornell.gltf\n"
+         "  luxrad submit office.glb --name office --solve --eps 1e-3\n"},
+        {"scenes", lx_cmd_scenes, 0, 0, "", "list scenes",
+         "Examples:\n  luxrad scenes\n  luxrad scenes --json\n"},
+        {"jobs", lx_cmd_jobs, 0, 0, "", "list jobs",
+         "Examples:\n  luxrad jobs\n"},
+        {"create", lx_cmd_create, 1, CREATE_OPTS, "SCENE [create options]",
+         "create a solve job (paused); prints the job id",
+         "The daemon checks the ranges; defaults in brackets are the "
+         "daemon's.\n\nExamples:\n  luxrad create 1\n"
+         "  luxrad create 1 --solver rmb --eps 5e-4 --tol 1e-4 --name "
+         "fine\n"},
+        {"run", lx_cmd_run, 1,
+         LX_BIT(ITERATIONS) | LX_BIT(CONVERGE) | LX_BIT(SECONDS) | LX_BIT(WAIT),
+         "JOB [--iterations N | --converge | --seconds T] [--wait]",
+         "start or continue a job",
+         "Without --wait, returns once the daemon has queued the job. With "
+         "--wait,\nblocks until the job stops (progress on stderr when it "
+         "is a terminal);\nexit status 0 when it is done or paused, 4 "
+         "when it failed or was\ncancelled.\n\nExamples:\n  luxrad run 4 "
+         "--wait\n  luxrad run 4 --iterations 2\n  luxrad run 4 --seconds "
+         "30 --wait\n"},
+        {"watch", lx_cmd_watch, 1, 0, "JOB", "follow a job's progress",
+         "On a terminal: a progress bar and one line of statistics per "
+         "iteration\n(iteration, links, leaves, memory, residual, error "
+         "estimate, seconds).\nOtherwise one JSON object per event. Exits "
+         "when the job is done, failed,\ncancelled or paused (at once if it "
+         "is not running): status 0, or 4 when it\nfailed or was "
+         "cancelled.\n\nExamples:\n  luxrad watch 4\n  luxrad watch 4 | "
+         "jq .stats.residual\n"},
+        {"query", lx_cmd_query, 1,
+         LX_BIT(POINTS) | LX_BIT(GRID) | LX_BIT(SURFACES) | LX_BIT(ORIGIN) |
+                 LX_BIT(U) | LX_BIT(V) | LX_BIT(SPACING) | LX_BIT(NORMAL),
+         "JOB (--points FILE | --grid --origin X,Y,Z --u X,Y,Z --v X,Y,Z "
+         "[--spacing P] [--normal X,Y,Z] | --surfaces)",
+         "illuminance from the latest solution (CSV, or --json)",
+         "Points file: one point per line, 'x y z nx ny nz': position in "
+         "metres and\nthe normal of the surface the point lies on (any "
+         "non-zero length); '#'\nstarts a comment, blank lines are ignored "
+         "(as luxrad-solve --points).\n\nThe grid covers origin + s*u + "
+         "t*v, s,t in [0,1], one point at each\ncell centre; the default "
+         "spacing follows EN 12464-1 (0.2 * 5^log10(d),\nd the longer "
+         "side). Its summary (min, mean, max, uniformity) goes to\nstderr.\n"
+         "\nCSV columns: points x,y,z,nx,ny,nz,lux; grid i,j,x,y,z,lux; "
+         "surfaces\nnode,name,area_m2,min_lux,mean_lux,max_lux.\n\n"
+         "Examples:\n  luxrad query 4 --points desk.txt\n"
+         "  luxrad query 4 --grid --origin 0,0.8,0 --u 4,0,0 --v 0,0,3\n"
+         "  luxrad query 4 --surfaces --json\n"},
+        {"export", lx_cmd_export, 1, LX_BIT(OUTPUT), "JOB -o FILE.glb",
+         "write the solved mesh as GLB",
+         "One mesh per scene node, COLOR_0 (tone-mapped illuminance) and "
+         "_ILLUMINANCE\n(lux per vertex). The file is written atomically "
+         "(a temporary, then\nrenamed).\n\nExamples:\n  luxrad export 4 -o "
+         "box-lit.glb\n"},
+        {"pause", lx_cmd_control, 1, 0, "JOB",
+         "pause a job (within its current iteration)",
+         "Examples:\n  luxrad pause 4\n"},
+        {"resume", lx_cmd_control, 1, 0, "JOB",
+         "resume a paused job toward its last target",
+         "Examples:\n  luxrad resume 4\n"},
+        {"cancel", lx_cmd_control, 1, 0, "JOB", "cancel a job (terminal)",
+         "Examples:\n  luxrad cancel 4\n"},
+        {"set", lx_cmd_set, 1, LX_BIT(EPS), "JOB --eps E",
+         "change a job's refinement threshold",
+         "Applied before the job's next iteration.\n\nExamples:\n  luxrad "
+         "set 4 --eps 5e-4\n"},
+        {"delete-job", lx_cmd_delete, 1, 0, "JOB",
+         "forget a job that is not running",
+         "Examples:\n  luxrad delete-job 4\n"},
+        {"delete-scene", lx_cmd_delete, 1, 0, "SCENE",
+         "delete a scene no job uses", "Examples:\n  luxrad delete-scene 1\n"},
+        {"info", lx_cmd_info, 1, 0, "JOB",
+         "one job: state, options, latest statistics",
+         "Examples:\n  luxrad info 4\n  luxrad info 4 --json\n"},
+        {"status", lx_cmd_status, 0, 0, "",
+         "daemon: uptime, jobs by state, memory",
+         "Examples:\n  luxrad status\n"},
+        {"shutdown", lx_cmd_shutdown, 0, 0, "",
+         "checkpoint every job and stop the daemon",
+         "Examples:\n  luxrad shutdown\n"},
+};
+
+#define NCOMMANDS (sizeof commands / sizeof commands[0])
+
+/* ------------------------------------------------------------------ help */
+
+static void print_option(lx_opt o)
+{
+	char lhs[64];
+
+	snprintf(lhs, sizeof lhs, "%s--%s", o == LX_OPT_OUTPUT ? "-o, " : "",
+	         opt_table[o].name);
+	if (opt_table[o].meta) {
+		size_t n = strlen(lhs);
+		snprintf(lhs + n, sizeof lhs - n, " %s", opt_table[o].meta);
+	}
+	printf("  %-22s %s\n", lhs, opt_table[o].help);
+}
+
+static void print_common(void)
+{
+	printf("\nCommon options:\n");
+	print_option(LX_OPT_CONNECT);
+	print_option(LX_OPT_TOKEN_FILE);
+	print_option(LX_OPT_JSON);
+	print_option(LX_OPT_HELP);
+}
+
+static void help_main(void)
+{
+	printf("Usage: luxrad [options] COMMAND [arguments]\n\n"
+	       "The command-line client of luxradd, the radiosity lighting "
+	       "daemon.\n\nCommands:\n");
+	for (size_t i = 0; i < NCOMMANDS; i++)
+		printf("  %-13s %s\n", commands[i].name, commands[i].summary);
+	print_common();
+	printf("\n'luxrad COMMAND --help' shows a command's options and "
+	       "examples.\n\n"
+	       "Address (--connect, else $LUXRAD_CONNECT, else %s):\n"
+	       "  HOST:PORT, HOST (port %d), [V6]:PORT, tcp:HOST:PORT,\n"
+	       "  unix:PATH or a path starting with '/' or '.' (Unix "
+	       "socket).\n"
+	       "Token (sent when given): --token-file FILE, else "
+	       "$LUXRAD_TOKEN_FILE,\nelse $LUXRAD_TOKEN. A daemon listening "
+	       "beyond loopback requires one.\n\n"
+	       "Exit status:\n"
+	       "  0  success\n"
+	       "  1  the daemon returned an error (stderr: \"luxrad: <code>: "
+	       "<message>\"),\n     or the output file could not be written\n"
+	       "  2  usage error: bad option or value, unreadable or malformed "
+	       "input file\n"
+	       "  3  cannot connect to the daemon, or the connection was lost\n"
+	       "  4  run --wait / watch: the job failed or was cancelled\n\n"
+	       "Examples:\n"
+	       "  luxrad submit scenes/cornell.gltf --solve --eps 1e-3\n"
+	       "  luxrad run 1 --wait\n"
+	       "  luxrad query 1 --points points.txt\n"
+	       "  luxrad export 1 -o lit.glb\n"
+	       "  LUXRAD_CONNECT=unix:/run/luxradd/luxradd.sock luxrad "
+	       "status\n",
+	       LX_DEFAULT_CONNECT, RP_DEFAULT_PORT);
+}
+
+static void help_command(const cmd_def *c)
+{
+	printf("Usage: luxrad %s%s%s\n\n%s.\n", c->name, c->usage[0] ? " " : "",
+	       c->usage, c->summary);
+	if (c->opts) {
+		printf("\nOptions:\n");
+		for (int o = 0; o < LX_OPT_COUNT; o++)
+			if (c->opts & ((uint64_t)1 << o))
+				print_option((lx_opt)o);
+	}
+	print_common();
+	printf("\n%s", c->text);
+}
+
+/* -------------------------------------------------------------- helpers */
+
+int lx_usage_error(const lx_ctx *cx, const char *fmt, ...)
+{
+	va_list ap;
+
+	fprintf(stderr, "luxrad: ");
+	va_start(ap, fmt);
+	vfprintf(stderr, fmt, ap);
+	va_end(ap);
+	if (cx && cx->cmd)
+		fprintf(stderr, "\nTry 'luxrad %s --help'.\n", cx->cmd);
+	else
+		fprintf(stderr, "\nTry 'luxrad --help'.\n");
+	return LX_EXIT_USAGE;
+}
+
+int lx_opt_double(const lx_ctx *cx, lx_opt o, double *out)
+{
+	const char *s = cx->val[o];
+	char *end;
+
+	if (!cx->given[o])
+		return 1;
+	errno = 0;
+	double v = strtod(s, &end);
+	if (end == s || *end || errno == ERANGE || !isfinite(v)) {
+		lx_usage_error(cx, "--%s: '%s' is not a finite number",
+		               opt_table[o].name, s);
+		return -1;
+	}
+	*out = v;
+	return 0;
+}
+
+int lx_opt_int(const lx_ctx *cx, lx_opt o, long long lo, long long hi,
+               long long *out)
+{
+	const char *s = cx->val[o];
+	char *end;
+
+	if (!cx->given[o])
+		return 1;
+	errno = 0;
+	long long v = strtoll(s, &end, 10);
+	if (end == s || *end || errno == ERANGE || v < lo || v > hi) {
+		lx_usage_error(cx, "--%s: '%s' is not an integer in %lld..%lld",
+		               opt_table[o].name, s, lo, hi);
+		return -1;
+	}
+	*out = v;
+	return 0;
+}
+
+int lx_opt_vec3(const lx_ctx *cx, lx_opt o, double out[3])
+{
+	const char *s = cx->val[o];
+	char *end;
+
+	for (int i = 0; i < 3; i++) {
+		errno = 0;
+		out[i] = strtod(s, &end);
+		if (end == s || errno == ERANGE || !isfinite(out[i]) ||
+		    *end != (i < 2 ? ',' : '\0')) {
+			lx_usage_error(cx,
+			               "--%s: '%s' is not three finite numbers "
+			               "'x,y,z'",
+			               opt_table[o].name, cx->val[o]);
+			return -1;
+		}
+		s = end + 1;
+	}
+	return 0;
+}
+
+int lx_pos_id(const lx_ctx *cx, int i, const char *what, long long *out)
+{
+	const char *s = cx->pos[i];
+	char *end;
+
+	errno = 0;
+	long long v = strtoll(s, &end, 10);
+	if (end == s || *end || errno == ERANGE || v <= 0 ||
+	    strspn(s, "0123456789") != strlen(s)) {
+		lx_usage_error(cx, "%s id '%s' is not a positive integer", what,
+		               s);
+		return -1;
+	}
+	*out = v;
+	return 0;
+}
+
+void lx_print_json(const json_t *v)
+{
+	json_dumpf(v, stdout, JSON_COMPACT);
+	putchar('\n');
+	fflush(stdout);
+}
+
+const char *lx_fmt_bytes(double b, char *buf, size_t len)
+{
+	static const char *const unit[] = {"B", "KiB", "MiB", "GiB", "TiB"};
+	int u = 0;
+
+	while (b >= 1024 && u < 4) {
+		b /= 1024;
+		u++;
+	}
+	snprintf(buf, len, u ? "%.1f %s" : "%.0f %s", b, unit[u]);
+	return buf;
+}
+
+/* -------------------------------------------------------------- parsing */
+
+static int find_option(const char *name, size_t len)
+{
+	for (int o = 0; o < LX_OPT_COUNT; o++)
+		if (strlen(opt_table[o].name) == len &&
+		    !strncmp(opt_table[o].name, name, len))
+			return o;
+	return -1;
+}
+
+/*
+ * Parse argv[*i] (an option) with its value; allowed is the mask of
+ * options accepted here.  Returns 0 or a usage error.
+ */
+static int parse_option(lx_ctx *cx, int argc, char **argv, int *i,
+                        uint64_t allowed)
+{
+	const char *a = argv[*i], *name, *eq, *value = NULL;
+	int o;
+
+	if (!strcmp(a, "-o") || !strcmp(a, "-h")) {
+		o = a[1] == 'o' ? LX_OPT_OUTPUT : LX_OPT_HELP;
+	} else {
+		name = a + 2;
+		eq = strchr(name, '=');
+		o = find_option(name, eq ? (size_t)(eq - name) : strlen(name));
+		if (o < 0 || a[1] != '-')
+			return lx_usage_error(cx, "unknown option '%s'", a);
+		if (eq)
+			value = eq + 1;
+	}
+	if (!(allowed & ((uint64_t)1 << o)) && cx->cmd)
+		return lx_usage_error(cx, "option --%s does not apply to '%s'",
+		                      opt_table[o].name, cx->cmd);
+	if (!(allowed & ((uint64_t)1 << o)))
+		return lx_usage_error(cx, "option --%s must follow the command",
+		                      opt_table[o].name);
+	if (opt_table[o].arg && !value) {
+		if (*i + 1 >= argc)
+			return lx_usage_error(cx,
+			                      "option --%s needs a value "
+			                      "(%s)",
+			                      opt_table[o].name,
+			                      opt_table[o].meta);
+		value = argv[++*i];
+	} else if (!opt_table[o].arg && value) {
+		return lx_usage_error(cx, "option --%s takes no value",
+		                      opt_table[o].name);
+	}
+	cx->val[o] = value;
+	cx->given[o]++;
+	return 0;
+}
+
+static const cmd_def *find_command(const char *name)
+{
+	for (size_t i = 0; i < NCOMMANDS; i++)
+		if (!strcmp(commands[i].name, name))
+			return &commands[i];
+	return NULL;
+}
+
+/* Collect the command's options and positional arguments. */
+static int parse_command_line(lx_ctx *cx, const cmd_def *c, int argc,
+                              char **argv, int first)
+{
+	int only_pos = 0;
+
+	for (int i = first; i < argc; i++) {
+		const char *a = argv[i];
+		if (!only_pos && !strcmp(a, "--")) {
+			only_pos = 1;
+		} else if (!only_pos && a[0] == '-' && a[1] != '\0') {
+			int rc = parse_option(cx, argc, argv, &i,
+			                      GLOBAL_OPTS | c->opts);
+			if (rc)
+				return rc;
+		} else {
+			cx->pos[cx->npos++] = argv[i];
+		}
+	}
+	if (cx->given[LX_OPT_HELP])
+		return 0;
+	if (cx->npos != c->npos) {
+		if (cx->npos < c->npos)
+			return lx_usage_error(cx,
+			                      "missing argument: luxrad %s "
+			                      "%s",
+			                      c->name, c->usage);
+		return lx_usage_error(cx, "unexpected argument '%s'",
+		                      cx->pos[c->npos]);
+	}
+	return 0;
+}
+
+/* Parse, then run the command; returns the exit status. */
+static int dispatch(lx_ctx *cx, int argc, char **argv)
+{
+	const cmd_def *c = NULL;
+	int i, rc;
+
+	for (i = 1; i < argc && argv[i][0] == '-' && argv[i][1]; i++) {
+		if (!strcmp(argv[i], "--version")) {
+			printf("luxrad %s (protocol %d)\n", LX_VERSION,
+			       RP_VERSION);
+			return LX_EXIT_OK;
+		}
+		if ((rc = parse_option(cx, argc, argv, &i, GLOBAL_OPTS)))
+			return rc;
+	}
+	if (i == argc) {
+		if (cx->given[LX_OPT_HELP]) {
+			help_main();
+			return LX_EXIT_OK;
+		}
+		return lx_usage_error(NULL, "no command given");
+	}
+	if (!strcmp(argv[i], "help")) {
+		c = i + 1 < argc ? find_command(argv[i + 1]) : NULL;
+		if (i + 1 < argc && !c)
+			return lx_usage_error(NULL, "unknown command '%s'",
+			                      argv[i + 1]);
+		c ? help_command(c) : help_main();
+		return LX_EXIT_OK;
+	}
+	if (!(c = find_command(argv[i])))
+		return lx_usage_error(NULL, "unknown command '%s'", argv[i]);
+	cx->cmd = c->name;
+	if ((rc = parse_command_line(cx, c, argc, argv, i + 1)))
+		return rc;
+	if (cx->given[LX_OPT_HELP]) {
+		help_command(c);
+		return LX_EXIT_OK;
+	}
+	cx->json = cx->given[LX_OPT_JSON] > 0;
+	return c->fn(cx);
+}
+
+int main(int argc, char **argv)
+{
+	lx_ctx cx;
+	int rc;
+
+	memset(&cx, 0, sizeof cx);
+	cx.pos = calloc((size_t)argc + 1, sizeof *cx.pos);
+	if (!cx.pos) {
+		fprintf(stderr, "luxrad: out of memory\n");
+		return LX_EXIT_USAGE;
+	}
+	rc = dispatch(&cx, argc, argv);
+	lx_close(&cx);
+	free(cx.pos);
+	if (fflush(stdout) != 0 && rc == LX_EXIT_OK) {
+		fprintf(stderr, "luxrad: cannot write to stdout\n");
+		rc = LX_EXIT_DAEMON;
+	}
+	return rc;
+}

@@ -1,0 +1,896 @@
+/*
+ * config.c -- luxradd's configuration: embedded defaults, the config file
+ * and the command line, in that order of precedence.
+ *
+ * Every option is one row of the key table below (name, type, field,
+ * range, example, help).  The file parser, the flag parser, --help and
+ * srv_config_dump all read that table, so an option cannot be parsed
+ * without being documented, and deploy/luxradd.conf is checked against
+ * the defaults by test_config.  New keys (Modbus, later) are new rows.
+ *
+ * DESIGN
+ * Values are parsed and range-checked one at a time (set_value), with a
+ * message naming the key and the bad text; the file parser prefixes
+ * "FILE:LINE: " and the flag parser "--flag: ".  Checks that involve
+ * several keys (require_token needs a token file, the Unix socket path
+ * must fit in sun_path) run once at the end (srv_config_check).
+ *
+ * Paths (data_dir, listen_unix, token_file) are made absolute when set,
+ * against the working directory at that moment, so a later chdir cannot
+ * change their meaning.  listen_unix follows data_dir
+ * (<data_dir>/luxradd.sock) until it is set explicitly -- except under
+ * systemd with RuntimeDirectory=, where the default is
+ * $RUNTIME_DIRECTORY/luxradd.sock: a DynamicUser's state directory sits
+ * behind /var/lib/private (0700 root), where no client could reach it.
+ *
+ * The default data directory, first match wins:
+ *   1. $STATE_DIRECTORY (systemd's StateDirectory=; the first entry when
+ *      it lists several, separated by ':');
+ *   2. $XDG_STATE_HOME/luxradd, when that variable is an absolute path
+ *      (the XDG spec says relative values are to be ignored);
+ *   3. /var/lib/luxradd when running as root (root's $HOME is /root on
+ *      every system, so $HOME would otherwise always win: a root daemon
+ *      belongs under /var/lib);
+ *   4. $HOME/.local/state/luxradd, then the passwd entry's home;
+ *   5. none: data_dir stays "" and srv_config_check asks for one.
+ */
+#include "config.h"
+
+#include <errno.h>
+#include <getopt.h>
+#include <math.h>
+#include <pwd.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <strings.h>
+#include <sys/un.h>
+#include <unistd.h>
+
+#define LUXRADD_VERSION "0.1.0"
+#define SOCK_NAME "luxradd.sock"
+#define KiB ((uint64_t)1 << 10)
+#define MiB ((uint64_t)1 << 20)
+#define GiB ((uint64_t)1 << 30)
+#define TiB ((uint64_t)1 << 40)
+#define MAX_LINE 8192 /* longest config-file line accepted */
+
+typedef enum key_type {
+	K_TCP,     /* host:port, or "none" / "" = off (char array) */
+	K_UNIX,    /* socket path, or "none" / "" = off (char array) */
+	K_DIR,     /* directory path, required (char array) */
+	K_FILE,    /* file path, or "none" / "" = none (char array) */
+	K_BOOL,    /* int 0/1 */
+	K_INT,     /* int within [lo, hi] */
+	K_SIZE,    /* size_t bytes within [lo, hi], K/M/G/T suffixes */
+	K_SECONDS, /* double seconds within [lo, hi], s/m/h suffixes */
+	K_LEVEL,   /* srv_log_level */
+} key_type;
+
+typedef struct cfg_key {
+	const char *name;    /* file key; the flag is --name with '-' for '_' */
+	key_type type;       /* how the value is parsed */
+	size_t off, size;    /* the field in srv_config, its sizeof */
+	double lo, hi;       /* accepted range (numbers) */
+	const char *metavar; /* for --help */
+	const char *example; /* a value worth showing */
+	const char *help;    /* one line */
+} cfg_key;
+
+#define F(field) offsetof(srv_config, field), sizeof(((srv_config *)0)->field)
+
+static const cfg_key keys[] = {
+        {"listen_tcp", K_TCP, F(listen_tcp), 0, 0, "HOST:PORT", "0.0.0.0:7420",
+         "protocol over TCP; [::1]:7420 for IPv6, port 0 = any free port; "
+         "none = off"},
+        {"listen_unix", K_UNIX, F(listen_unix), 0, 0, "PATH",
+         "/run/luxradd/luxradd.sock",
+         "protocol over a Unix socket (default <data_dir>/" SOCK_NAME
+         ", or $RUNTIME_DIRECTORY/" SOCK_NAME " under systemd); none = off"},
+        {"metrics_listen", K_TCP, F(metrics_listen), 0, 0, "HOST:PORT",
+         "0.0.0.0:7421", "Prometheus GET /metrics over HTTP; none = off"},
+        {"data_dir", K_DIR, F(data_dir), 0, 0, "DIR", "/srv/luxradd",
+         "scenes, job checkpoints and the database (created 0700)"},
+        {"token_file", K_FILE, F(token_file), 0, 0, "FILE",
+         "/etc/luxradd/token",
+         "file holding the shared secret clients send in hello; none = no "
+         "token"},
+        {"require_token", K_BOOL, F(require_token), 0, 1, "BOOL", "yes",
+         "ask for the token on loopback and Unix connections too"},
+        {"workers", K_INT, F(workers), 1, 256, "N", "4",
+         "jobs solved at the same time (1..256)"},
+        {"solver_threads", K_INT, F(solver_threads), 0, 1024, "N", "2",
+         "engine threads per job (0..1024); 0 = cores / workers, at least 1"},
+        {"query_threads", K_INT, F(query_threads), 1, 256, "N", "4",
+         "threads answering queries and exports (1..256)"},
+        {"log_level", K_LEVEL, F(log_level), 0, 0, "LEVEL", "debug",
+         "error | warn | info | debug; logs go to stderr"},
+        {"max_header_bytes", K_SIZE, F(max_header_bytes), (double)KiB,
+         (double)GiB, "SIZE", "16M",
+         "longest request header line (1K..1G; K, M, G = KiB, MiB, GiB)"},
+        {"max_scene_bytes", K_SIZE, F(max_scene_bytes), (double)KiB,
+         (double)TiB, "SIZE", "4G", "largest scene upload (1K..1T)"},
+        {"max_connections", K_INT, F(max_connections), 1, 65536, "N", "256",
+         "client connections open at once (1..65536)"},
+        {"max_scenes", K_INT, F(max_scenes), 1, 1000000, "N", "16",
+         "scenes stored at once (1..1000000)"},
+        {"max_jobs", K_INT, F(max_jobs), 1, 1000000, "N", "1024",
+         "jobs stored at once, in any state (1..1000000)"},
+        {"max_subscriptions", K_INT, F(max_subscriptions), 1, 65536, "N", "64",
+         "job subscriptions per connection (1..65536)"},
+        {"max_points", K_INT, F(max_points), 1, 100000000, "N", "100000",
+         "points in one query (1..100000000)"},
+        {"idle_timeout", K_SECONDS, F(idle_timeout_s), 0, 31536000, "DURATION",
+         "30m",
+         "close connections silent this long; 0 = never (s, m, h suffixes)"},
+        {"max_output_bytes", K_SIZE, F(max_output_bytes), (double)KiB,
+         (double)TiB, "SIZE", "64M",
+         "send buffer per connection before events are dropped (1K..1T)"},
+        {"checkpoint_interval", K_SECONDS, F(checkpoint_interval_s), 0.01,
+         86400, "DURATION", "5m",
+         "a running job's solution is saved at most this often (0.01s..24h)"},
+        /* Modbus keys (issue 5) go here. */
+};
+
+#define NKEYS (sizeof(keys) / sizeof(keys[0]))
+
+static const char *const level_names[] = {"error", "warn", "info", "debug"};
+
+static void fail(char *msg, size_t msglen, const char *fmt, ...)
+        __attribute__((format(printf, 3, 4)));
+static void fail(char *msg, size_t msglen, const char *fmt, ...)
+{
+	va_list ap;
+	if (!msg || !msglen)
+		return;
+	va_start(ap, fmt);
+	vsnprintf(msg, msglen, fmt, ap);
+	va_end(ap);
+}
+
+/* ------------------------------------------------------------- defaults */
+
+/* Copy s into dst[size]; 0, or -1 when it does not fit. */
+static int copy_str(char *dst, size_t size, const char *s)
+{
+	size_t n = strlen(s);
+	if (n >= size)
+		return -1;
+	memcpy(dst, s, n + 1);
+	return 0;
+}
+
+static int join_path(char *dst, size_t size, const char *a, const char *b)
+{
+	int n = snprintf(dst, size, "%s%s%s", a,
+	                 a[0] && a[strlen(a) - 1] == '/' ? "" : "/", b);
+	return n < 0 || (size_t)n >= size ? -1 : 0;
+}
+
+/* First entry of a systemd directory list ("/a:/b"), if absolute. */
+static int systemd_dir(const char *var, char *dst, size_t size)
+{
+	const char *v = getenv(var);
+	size_t n = v ? strcspn(v, ":") : 0;
+	if (!v || v[0] != '/' || n >= size)
+		return 0;
+	memcpy(dst, v, n);
+	dst[n] = '\0';
+	return 1;
+}
+
+/* The default data directory (see the list at the top of the file). */
+static void default_data_dir(char *dst, size_t size)
+{
+	const char *xdg = getenv("XDG_STATE_HOME");
+	const char *home = getenv("HOME");
+	dst[0] = '\0';
+	if (systemd_dir("STATE_DIRECTORY", dst, size))
+		return;
+	if (xdg && xdg[0] == '/') {
+		if (join_path(dst, size, xdg, "luxradd") < 0)
+			dst[0] = '\0';
+		return;
+	}
+	if (geteuid() == 0) {
+		copy_str(dst, size, "/var/lib/luxradd");
+		return;
+	}
+	if (!home || home[0] != '/') {
+		struct passwd *pw = getpwuid(geteuid());
+		home = pw && pw->pw_dir && pw->pw_dir[0] == '/' ? pw->pw_dir
+		                                                : NULL;
+	}
+	if (home && join_path(dst, size, home, ".local/state/luxradd") < 0)
+		dst[0] = '\0';
+}
+
+void srv_config_default(srv_config *c)
+{
+	char run[4096];
+	memset(c, 0, sizeof(*c));
+	copy_str(c->listen_tcp, sizeof(c->listen_tcp), "127.0.0.1:7420");
+	copy_str(c->metrics_listen, sizeof(c->metrics_listen),
+	         "127.0.0.1:7421");
+	default_data_dir(c->data_dir, sizeof(c->data_dir));
+	if (systemd_dir("RUNTIME_DIRECTORY", run, sizeof(run))) {
+		c->listen_unix_set = 1; /* stays there when data_dir moves */
+		if (join_path(c->listen_unix, sizeof(c->listen_unix), run,
+		              SOCK_NAME) < 0)
+			c->listen_unix[0] = '\0';
+	} else if (c->data_dir[0] &&
+	           join_path(c->listen_unix, sizeof(c->listen_unix),
+	                     c->data_dir, SOCK_NAME) < 0) {
+		c->listen_unix[0] = '\0';
+	}
+	c->require_token = 0;
+	c->workers = 2;
+	c->solver_threads = 0;
+	c->query_threads = 2;
+	c->log_level = SRV_LOG_INFO;
+	c->max_header_bytes = 4 * MiB;
+	c->max_scene_bytes = GiB;
+	c->max_connections = 64;
+	c->max_scenes = 64;
+	c->max_jobs = 256;
+	c->max_subscriptions = 16;
+	c->max_points = 1000000;
+	c->idle_timeout_s = 600;
+	c->max_output_bytes = 8 * MiB;
+	c->checkpoint_interval_s = 30;
+}
+
+/* --------------------------------------------------------------- values */
+
+static int is_none(const char *v)
+{
+	return v[0] == '\0' || strcmp(v, "none") == 0;
+}
+
+static int parse_bool(const char *v, int *out)
+{
+	static const char *const t[] = {"true", "yes", "on", "1"};
+	static const char *const f[] = {"false", "no", "off", "0"};
+	for (size_t i = 0; i < 4; i++) {
+		if (strcasecmp(v, t[i]) == 0)
+			return *out = 1, 0;
+		if (strcasecmp(v, f[i]) == 0)
+			return *out = 0, 0;
+	}
+	return -1;
+}
+
+/* "1234", "4K", "4KiB", "16 M", "1G"...: binary units.  -1 if malformed
+ * or past 2^63. */
+static int parse_size(const char *v, uint64_t *out)
+{
+	static const struct {
+		const char *s;
+		uint64_t mult;
+	} units[] = {{"", 1},    {"b", 1},     {"k", KiB}, {"kib", KiB},
+	             {"m", MiB}, {"mib", MiB}, {"g", GiB}, {"gib", GiB},
+	             {"t", TiB}, {"tib", TiB}};
+	char *end;
+	if (*v < '0' || *v > '9')
+		return -1;
+	errno = 0;
+	unsigned long long n = strtoull(v, &end, 10);
+	if (errno)
+		return -1;
+	while (*end == ' ' || *end == '\t')
+		end++;
+	for (size_t i = 0; i < sizeof(units) / sizeof(units[0]); i++) {
+		if (strcasecmp(end, units[i].s) != 0)
+			continue;
+		if (n > (UINT64_MAX >> 1) / units[i].mult)
+			return -1;
+		*out = n * units[i].mult;
+		return 0;
+	}
+	return -1;
+}
+
+/* "30", "30s", "1.5m", "2h", "250ms": seconds.  -1 if malformed. */
+static int parse_seconds(const char *v, double *out)
+{
+	char *end;
+	if ((*v < '0' || *v > '9') && *v != '.')
+		return -1;
+	errno = 0;
+	double x = strtod(v, &end);
+	if (errno || !isfinite(x) || end == v)
+		return -1;
+	while (*end == ' ' || *end == '\t')
+		end++;
+	if (strcmp(end, "") == 0 || strcmp(end, "s") == 0)
+		*out = x;
+	else if (strcmp(end, "ms") == 0)
+		*out = x / 1000;
+	else if (strcmp(end, "m") == 0 || strcmp(end, "min") == 0)
+		*out = x * 60;
+	else if (strcmp(end, "h") == 0)
+		*out = x * 3600;
+	else
+		return -1;
+	return 0;
+}
+
+int srv_hostport_parse(const char *s, char *host, size_t hostlen, int *port,
+                       char *msg, size_t msglen)
+{
+	const char *colon, *h = s;
+	size_t hl;
+	if (s[0] == '[') { /* [v6addr]:port */
+		const char *rb = strchr(s, ']');
+		if (!rb || rb[1] != ':')
+			return fail(msg, msglen,
+			            "'%s' is not [IPV6]:PORT (e.g. [::1]:7420)",
+			            s),
+			       -1;
+		h = s + 1;
+		hl = (size_t)(rb - h);
+		colon = rb + 1;
+	} else {
+		colon = strrchr(s, ':');
+		if (!colon || memchr(s, ':', (size_t)(colon - s)))
+			return fail(msg, msglen,
+			            "'%s' is not HOST:PORT (e.g. "
+			            "127.0.0.1:7420; "
+			            "IPv6 as [::1]:7420)",
+			            s),
+			       -1;
+		hl = (size_t)(colon - s);
+	}
+	if (hl == 0)
+		return fail(msg, msglen,
+		            "'%s' has no host (0.0.0.0 = every IPv4 interface, "
+		            "[::] = every IPv6 one)",
+		            s),
+		       -1;
+	if (hl >= hostlen)
+		return fail(msg, msglen, "'%s': host name too long", s), -1;
+	char *end;
+	errno = 0;
+	long p = strtol(colon + 1, &end, 10);
+	if (colon[1] < '0' || colon[1] > '9' || *end || errno || p > 65535)
+		return fail(msg, msglen,
+		            "'%s': port must be a number in 0..65535", s),
+		       -1;
+	for (size_t i = 0; i < hl; i++)
+		if (h[i] <= ' ' || h[i] == '/' || h[i] == '[' || h[i] == ']')
+			return fail(msg, msglen, "'%s': bad character in host",
+			            s),
+			       -1;
+	memcpy(host, h, hl);
+	host[hl] = '\0';
+	*port = (int)p;
+	return 0;
+}
+
+/* Store path v (absolute, or made absolute) into dst[size]. */
+static int set_path(char *dst, size_t size, const char *v, char *msg,
+                    size_t msglen)
+{
+	char cwd[4096];
+	if (v[0] == '/') {
+		if (copy_str(dst, size, v) < 0)
+			return fail(msg, msglen,
+			            "path too long (%zu bytes max)", size - 1),
+			       -1;
+		return 0;
+	}
+	if (!getcwd(cwd, sizeof(cwd)))
+		return fail(msg, msglen,
+		            "'%s' is relative and the working directory is "
+		            "unknown (%s): give an absolute path",
+		            v, strerror(errno)),
+		       -1;
+	if (join_path(dst, size, cwd, v) < 0)
+		return fail(msg, msglen, "path too long (%zu bytes max)",
+		            size - 1),
+		       -1;
+	return 0;
+}
+
+static int set_number(srv_config *c, const cfg_key *k, const char *v, char *msg,
+                      size_t msglen)
+{
+	char *p = (char *)c + k->off;
+	if (k->type == K_INT) {
+		char *end;
+		errno = 0;
+		long n = strtol(v, &end, 10);
+		if (end == v || *end || errno)
+			return fail(msg, msglen, "'%s' is not an integer", v),
+			       -1;
+		if (n < k->lo || n > k->hi)
+			return fail(msg, msglen, "%ld is out of range %g..%g",
+			            n, k->lo, k->hi),
+			       -1;
+		*(int *)p = (int)n;
+	} else if (k->type == K_SIZE) {
+		uint64_t n;
+		if (parse_size(v, &n) < 0)
+			return fail(msg, msglen,
+			            "'%s' is not a size (bytes, or with a K, "
+			            "M, "
+			            "G or T suffix: 4M, 1GiB)",
+			            v),
+			       -1;
+		if ((double)n < k->lo || (double)n > k->hi)
+			return fail(msg, msglen,
+			            "'%s' is out of range %.0f..%.0f "
+			            "bytes",
+			            v, k->lo, k->hi),
+			       -1;
+		*(size_t *)p = (size_t)n;
+	} else {
+		double s;
+		if (parse_seconds(v, &s) < 0)
+			return fail(msg, msglen,
+			            "'%s' is not a duration (seconds, or with "
+			            "s, "
+			            "m, h, ms suffixes: 30, 30s, 5m)",
+			            v),
+			       -1;
+		if (s < k->lo || s > k->hi)
+			return fail(msg, msglen,
+			            "'%s' is out of range %gs..%gs", v, k->lo,
+			            k->hi),
+			       -1;
+		*(double *)p = s;
+	}
+	return 0;
+}
+
+static int set_value(srv_config *c, const cfg_key *k, const char *v, char *msg,
+                     size_t msglen)
+{
+	char *p = (char *)c + k->off, host[300];
+	int port, b;
+	switch (k->type) {
+	case K_TCP:
+		if (is_none(v))
+			return p[0] = '\0', 0;
+		if (srv_hostport_parse(v, host, sizeof(host), &port, msg,
+		                       msglen) < 0)
+			return -1;
+		if (copy_str(p, k->size, v) < 0)
+			return fail(msg, msglen, "'%s' is too long", v), -1;
+		return 0;
+	case K_UNIX:
+		c->listen_unix_set = 1;
+		if (is_none(v))
+			return p[0] = '\0', 0;
+		return set_path(p, k->size, v, msg, msglen);
+	case K_FILE:
+		if (is_none(v))
+			return p[0] = '\0', 0;
+		return set_path(p, k->size, v, msg, msglen);
+	case K_DIR:
+		if (is_none(v))
+			return fail(msg, msglen,
+			            "a data directory is required"),
+			       -1;
+		if (set_path(p, k->size, v, msg, msglen) < 0)
+			return -1;
+		if (!c->listen_unix_set &&
+		    join_path(c->listen_unix, sizeof(c->listen_unix), p,
+		              SOCK_NAME) < 0)
+			return fail(msg, msglen, "path too long"), -1;
+		return 0;
+	case K_BOOL:
+		if (parse_bool(v, &b) < 0)
+			return fail(msg, msglen,
+			            "'%s' is not a boolean (true/false, "
+			            "yes/no, "
+			            "on/off, 1/0)",
+			            v),
+			       -1;
+		*(int *)p = b;
+		return 0;
+	case K_LEVEL:
+		for (int i = 0; i < 4; i++)
+			if (strcasecmp(v, level_names[i]) == 0 ||
+			    (i == SRV_LOG_WARN &&
+			     strcasecmp(v, "warning") == 0))
+				return *(srv_log_level *)p = (srv_log_level)i,
+				                       0;
+		return fail(msg, msglen,
+		            "'%s' is not a log level (error, warn, info, "
+		            "debug)",
+		            v),
+		       -1;
+	default:
+		return set_number(c, k, v, msg, msglen);
+	}
+}
+
+/* The key named name (underscores or dashes), or NULL. */
+static const cfg_key *find_key(const char *name, size_t len)
+{
+	for (size_t i = 0; i < NKEYS; i++) {
+		const char *k = keys[i].name;
+		size_t j = 0;
+		if (strlen(k) != len)
+			continue;
+		while (j < len &&
+		       (name[j] == k[j] || (name[j] == '-' && k[j] == '_')))
+			j++;
+		if (j == len)
+			return &keys[i];
+	}
+	return NULL;
+}
+
+/* ------------------------------------------------------------- the file */
+
+/*
+ * Split one line into key and value (both NUL-terminated in place).
+ * Returns 1 for a setting, 0 for a blank or comment line, -1 on a syntax
+ * error (msg filled).
+ */
+static int split_line(char *line, char **key, size_t *keylen, char **val,
+                      char *msg, size_t msglen)
+{
+	char *s = line, *e;
+	while (*s == ' ' || *s == '\t')
+		s++;
+	if (*s == '\0' || *s == '#')
+		return 0;
+	*key = s;
+	while (*s == '_' || *s == '-' || (*s >= 'a' && *s <= 'z') ||
+	       (*s >= 'A' && *s <= 'Z') || (*s >= '0' && *s <= '9'))
+		s++;
+	*keylen = (size_t)(s - *key);
+	while (*s == ' ' || *s == '\t')
+		s++;
+	if (*keylen == 0 || *s != '=')
+		return fail(msg, msglen, "expected 'key = value'"), -1;
+	s++;
+	while (*s == ' ' || *s == '\t')
+		s++;
+	if (*s == '"' || *s == '\'') {
+		char q = *s++;
+		e = strchr(s, q);
+		if (!e)
+			return fail(msg, msglen, "unterminated %c quote", q),
+			       -1;
+		*e++ = '\0';
+		*val = s;
+		while (*e == ' ' || *e == '\t')
+			e++;
+		if (*e && *e != '#')
+			return fail(msg, msglen,
+			            "unexpected text after the closing quote"),
+			       -1;
+		return 1;
+	}
+	*val = s;
+	for (e = s; *e; e++) /* a comment starts at '#' after a blank */
+		if (*e == '#' && (e == s || e[-1] == ' ' || e[-1] == '\t'))
+			break;
+	*e = '\0';
+	while (e > s && (e[-1] == ' ' || e[-1] == '\t'))
+		*--e = '\0';
+	return 1;
+}
+
+static int load_line(srv_config *c, char *line, const char *path,
+                     unsigned lineno, char *msg, size_t msglen)
+{
+	char *key, *val, why[600];
+	size_t keylen;
+	int r = split_line(line, &key, &keylen, &val, why, sizeof(why));
+	if (r <= 0) {
+		if (r < 0)
+			fail(msg, msglen, "%s:%u: %s", path, lineno, why);
+		return r;
+	}
+	const cfg_key *k = find_key(key, keylen);
+	if (!k) {
+		fail(msg, msglen, "%s:%u: unknown key '%.*s'", path, lineno,
+		     (int)(keylen > 100 ? 100 : keylen), key);
+		return -1;
+	}
+	if (set_value(c, k, val, why, sizeof(why)) < 0) {
+		fail(msg, msglen, "%s:%u: %s: %s", path, lineno, k->name, why);
+		return -1;
+	}
+	return 0;
+}
+
+int srv_config_load_file(srv_config *c, const char *path, int must_exist,
+                         char *msg, size_t msglen)
+{
+	FILE *f = fopen(path, "r");
+	if (!f) {
+		if (errno == ENOENT && !must_exist)
+			return 0;
+		fail(msg, msglen, "%s: cannot open config file: %s", path,
+		     strerror(errno));
+		return -1;
+	}
+	char *line = NULL;
+	size_t cap = 0;
+	ssize_t n;
+	unsigned lineno = 0;
+	int rc = 0;
+	while (rc == 0 && (n = getline(&line, &cap, f)) >= 0) {
+		lineno++;
+		if (n > MAX_LINE) {
+			fail(msg, msglen, "%s:%u: line longer than %d bytes",
+			     path, lineno, MAX_LINE);
+			rc = -1;
+		} else if ((size_t)n != strlen(line)) {
+			fail(msg, msglen, "%s:%u: NUL byte (not a text file?)",
+			     path, lineno);
+			rc = -1;
+		} else {
+			line[strcspn(line, "\r\n")] = '\0';
+			rc = load_line(c, line, path, lineno, msg, msglen) < 0
+			             ? -1
+			             : 0;
+		}
+	}
+	if (rc == 0 && ferror(f)) {
+		fail(msg, msglen, "%s: read error: %s", path, strerror(errno));
+		rc = -1;
+	}
+	free(line);
+	fclose(f);
+	return rc;
+}
+
+/* ----------------------------------------------------- cross-key checks */
+
+int srv_config_check(const srv_config *c, char *msg, size_t msglen)
+{
+	struct sockaddr_un sun;
+	if (!c->data_dir[0]) {
+		fail(msg, msglen,
+		     "data_dir: no default (STATE_DIRECTORY, XDG_STATE_HOME "
+		     "and "
+		     "HOME are unset): set data_dir");
+		return -1;
+	}
+	if (strlen(c->listen_unix) >= sizeof(sun.sun_path)) {
+		fail(msg, msglen,
+		     "listen_unix: '%s' is longer than a Unix socket path may "
+		     "be "
+		     "(%zu bytes): set listen_unix to a shorter path, or none",
+		     c->listen_unix, sizeof(sun.sun_path) - 1);
+		return -1;
+	}
+	if (c->require_token && !c->token_file[0]) {
+		fail(msg, msglen,
+		     "require_token is set but token_file is none");
+		return -1;
+	}
+	if (!c->listen_tcp[0] && !c->listen_unix[0]) {
+		fail(msg, msglen,
+		     "listen_tcp and listen_unix are both none: clients could "
+		     "not connect");
+		return -1;
+	}
+	return 0;
+}
+
+/* ------------------------------------------------------------ printing */
+
+/* Shortest decimal that reads back as x. */
+static void fmt_double(char *buf, size_t len, double x)
+{
+	for (int prec = 6; prec <= 17; prec++) {
+		snprintf(buf, len, "%.*g", prec, x);
+		if (strtod(buf, NULL) == x)
+			return;
+	}
+}
+
+static void fmt_value(const srv_config *c, const cfg_key *k, char *buf,
+                      size_t len)
+{
+	const char *p = (const char *)c + k->off;
+	switch (k->type) {
+	case K_TCP:
+	case K_UNIX:
+	case K_FILE:
+	case K_DIR:
+		if (!p[0])
+			snprintf(buf, len, "none");
+		else if (strpbrk(p, " \t#\"'") || strcmp(p, "none") == 0)
+			snprintf(buf, len, strchr(p, '"') ? "'%s'" : "\"%s\"",
+			         p);
+		else
+			snprintf(buf, len, "%s", p);
+		break;
+	case K_BOOL:
+		snprintf(buf, len, "%s", *(const int *)p ? "yes" : "no");
+		break;
+	case K_INT:
+		snprintf(buf, len, "%d", *(const int *)p);
+		break;
+	case K_LEVEL:
+		snprintf(buf, len, "%s",
+		         level_names[*(const srv_log_level *)p]);
+		break;
+	case K_SIZE: {
+		uint64_t n = *(const size_t *)p;
+		static const char sfx[] = "TGMK";
+		for (int i = 0; i < 4; i++) {
+			uint64_t m = (uint64_t)1 << (10 * (4 - i));
+			if (n && n % m == 0) {
+				snprintf(buf, len, "%llu%c",
+				         (unsigned long long)(n / m), sfx[i]);
+				return;
+			}
+		}
+		snprintf(buf, len, "%llu", (unsigned long long)n);
+		break;
+	}
+	case K_SECONDS: {
+		char d[40];
+		fmt_double(d, sizeof(d), *(const double *)p);
+		snprintf(buf, len, "%ss", d);
+		break;
+	}
+	}
+}
+
+void srv_config_dump(const srv_config *c,
+                     void (*line)(void *ud, const char *text), void *ud)
+{
+	char text[4400], val[4200];
+	snprintf(text, sizeof(text), "# config_file: %s",
+	         c->config_file[0] ? c->config_file : "none");
+	line(ud, text);
+	for (size_t i = 0; i < NKEYS; i++) {
+		fmt_value(c, &keys[i], val, sizeof(val));
+		snprintf(text, sizeof(text), "%s = %s", keys[i].name, val);
+		line(ud, text);
+	}
+}
+
+void srv_config_usage(const char *argv0)
+{
+	srv_config d;
+	char lhs[64], def[4200], flag[48];
+	srv_config_default(&d);
+	printf("Usage: %s [--config FILE] [OPTIONS]\n\n"
+	       "luxradd, the luxrad radiosity daemon: stores scenes, solves "
+	       "them in\nbackground jobs and answers illuminance queries over "
+	       "TCP and a Unix\nsocket.\n\n"
+	       "  -c, --config FILE        read FILE first (key = value "
+	       "lines); flags win\n"
+	       "  -h, --help               show this help\n"
+	       "  -V, --version            print the version\n\n"
+	       "Every option below is also a config-file key: --listen-tcp X "
+	       "is\nlisten_tcp = X.  Boolean flags alone mean yes; give a "
+	       "value as\n--require-token=no.\n\n",
+	       argv0 && argv0[0] ? argv0 : "luxradd");
+	for (size_t i = 0; i < NKEYS; i++) {
+		const cfg_key *k = &keys[i];
+		size_t j;
+		for (j = 0; k->name[j] && j + 1 < sizeof(flag); j++)
+			flag[j] = k->name[j] == '_' ? '-' : k->name[j];
+		flag[j] = '\0';
+		snprintf(lhs, sizeof(lhs), "--%s %s", flag, k->metavar);
+		fmt_value(&d, k, def, sizeof(def));
+		printf("  %s\n      %s\n      default: %s; e.g. --%s%s%s\n",
+		       lhs, k->help, def, flag, k->type == K_BOOL ? "=" : " ",
+		       k->example);
+	}
+	printf("\nExamples:\n"
+	       "  luxradd --config /etc/luxradd/luxradd.conf\n"
+	       "  luxradd --data-dir /tmp/lx --listen-tcp none --workers 4\n"
+	       "  luxradd --listen-tcp 0.0.0.0:7420 --token-file "
+	       "/etc/luxradd/token\n");
+}
+
+/* ----------------------------------------------------------------- argv */
+
+enum { OPT_CONFIG = 'c', OPT_HELP = 'h', OPT_VERSION = 'V', OPT_KEY = 256 };
+
+static void build_longopts(struct option *lo, char names[][48])
+{
+	size_t i;
+	for (i = 0; i < NKEYS; i++) {
+		size_t j;
+		for (j = 0; keys[i].name[j] && j + 1 < 48; j++)
+			names[i][j] =
+			        keys[i].name[j] == '_' ? '-' : keys[i].name[j];
+		names[i][j] = '\0';
+		lo[i] = (struct option){names[i],
+		                        keys[i].type == K_BOOL
+		                                ? optional_argument
+		                                : required_argument,
+		                        NULL, OPT_KEY + (int)i};
+	}
+	lo[i++] =
+	        (struct option){"config", required_argument, NULL, OPT_CONFIG};
+	lo[i++] = (struct option){"help", no_argument, NULL, OPT_HELP};
+	lo[i++] = (struct option){"version", no_argument, NULL, OPT_VERSION};
+	lo[i] = (struct option){NULL, 0, NULL, 0};
+}
+
+/* Describe getopt's complaint about argv[optind - 1]. */
+static void getopt_error(int r, int argc, char **argv, char *msg, size_t msglen)
+{
+	const char *arg =
+	        optind >= 1 && optind - 1 < argc ? argv[optind - 1] : "?";
+	if (r == ':')
+		fail(msg, msglen, "option '%s' needs a value", arg);
+	else if (optopt && strncmp(arg, "--", 2) != 0)
+		fail(msg, msglen, "unknown option '-%c'", optopt);
+	else
+		fail(msg, msglen, "unknown or ambiguous option '%s'", arg);
+}
+
+/*
+ * One pass over argv.  Pass 0 handles --help, --version and --config;
+ * pass 1 applies every other flag.  Returns 0, 1 (help/version printed)
+ * or -1.
+ */
+static int args_pass(srv_config *c, int pass, int argc, char **argv,
+                     const struct option *lo, char *msg, size_t msglen)
+{
+	int r;
+	optind = 0; /* glibc: full re-initialisation */
+	opterr = 0;
+	while ((r = getopt_long(argc, argv, ":c:hV", lo, NULL)) != -1) {
+		if (r == '?' || r == ':') {
+			getopt_error(r, argc, argv, msg, msglen);
+			return -1;
+		}
+		if (pass == 0 && r == OPT_HELP) {
+			srv_config_usage(argv[0]);
+			return 1;
+		}
+		if (pass == 0 && r == OPT_VERSION) {
+			printf("luxradd " LUXRADD_VERSION "\n");
+			return 1;
+		}
+		if (pass == 0 && r == OPT_CONFIG) {
+			if (set_path(c->config_file, sizeof(c->config_file),
+			             optarg, msg, msglen) < 0)
+				return -1;
+			if (srv_config_load_file(c, c->config_file, 1, msg,
+			                         msglen) < 0)
+				return -1;
+		}
+		if (pass == 1 && r >= OPT_KEY) {
+			const cfg_key *k = &keys[r - OPT_KEY];
+			char why[600];
+			const char *v = optarg ? optarg : "yes";
+			if (set_value(c, k, v, why, sizeof(why)) < 0) {
+				fail(msg, msglen, "--%s: %s",
+				     lo[r - OPT_KEY].name, why);
+				return -1;
+			}
+		}
+	}
+	if (optind < argc) {
+		fail(msg, msglen,
+		     "unexpected argument '%s' (boolean flags take a value as "
+		     "--flag=value)",
+		     argv[optind]);
+		return -1;
+	}
+	return 0;
+}
+
+int srv_config_from_args(srv_config *c, int argc, char **argv, char *msg,
+                         size_t msglen)
+{
+	struct option lo[NKEYS + 4];
+	char names[NKEYS][48];
+	build_longopts(lo, names);
+	for (int pass = 0; pass < 2; pass++) {
+		int r = args_pass(c, pass, argc, argv, lo, msg, msglen);
+		if (r != 0)
+			return r;
+	}
+	return srv_config_check(c, msg, msglen) < 0 ? -1 : 0;
+}

@@ -1,0 +1,17 @@
+# luxrad_modbus: the Modbus TCP server of luxradd (issue 5) -- modbus.c,
+# mb_image.c, mb_config.c, regmap.c; the map is documented in MODBUS.md.
+#
+# Included by daemon/server/CMakeLists.txt (include(modbus.cmake)), or by
+# tests/modbus when that line is not there yet.  libmodbus is linked
+# PRIVATE on purpose: its pkg-config include directory (/usr/include/modbus)
+# holds a modbus.h that would shadow ours in every consumer; modbus.c
+# includes it as <modbus/modbus.h>.
+pkg_check_modules(LIBMODBUS REQUIRED IMPORTED_TARGET GLOBAL libmodbus)
+add_library(luxrad_modbus STATIC
+  ${CMAKE_CURRENT_LIST_DIR}/modbus.c
+  ${CMAKE_CURRENT_LIST_DIR}/mb_image.c
+  ${CMAKE_CURRENT_LIST_DIR}/mb_config.c
+  ${CMAKE_CURRENT_LIST_DIR}/regmap.c)
+target_include_directories(luxrad_modbus PUBLIC ${CMAKE_CURRENT_LIST_DIR})
+target_link_libraries(luxrad_modbus PRIVATE PkgConfig::LIBMODBUS
+                      PUBLIC Threads::Threads m)

@@ -1,0 +1,249 @@
+/*
+ * publish.c -- events to subscribers: subscribe / unsubscribe, the
+ * fan-out of events posted by workers, the drop policy, and the replies
+ * owed to job.pause / job.cancel once a worker has stopped.
+ *
+ * Runs on the I/O thread only.  Workers encode an event once and post it
+ * to the inbox; here it is copied into the output queue of every
+ * connection subscribed to the job, under the drop policy (server.c,
+ * DESIGN): a progress event that would take a queue past
+ * max_output_bytes is dropped and counted on the subscription; an
+ * iteration or state event that does not fit closes the connection with
+ * slow_consumer.  The next iteration event delivered carries
+ * "dropped_progress": n.
+ *
+ * Ordering: state events carry the job's state_seq.  The I/O thread
+ * publishes its own state changes at once; a worker's change still in
+ * the inbox when the I/O thread has published a later one is stale and
+ * skipped.  A subscription remembers the state_seq and iteration that its
+ * subscribe reply reported, and gets only events after those, so a
+ * client neither misses nor repeats a transition.
+ */
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "log.h"
+#include "server.h"
+
+static srv_sub *find_sub(srv_conn *c, uint64_t job)
+{
+	for (int i = 0; i < c->nsubs; i++)
+		if (c->subs[i].job == job)
+			return &c->subs[i];
+	return NULL;
+}
+
+/* The iteration event with "dropped_progress": n spliced in before the
+ * closing brace of the header. */
+static unsigned char *splice_dropped(const unsigned char *data, size_t len,
+                                     uint64_t n, size_t *out_len)
+{
+	char extra[48];
+	int k = snprintf(extra, sizeof(extra), ",\"dropped_progress\":%llu}\n",
+	                 (unsigned long long)n);
+	if (len < 2 || data[len - 2] != '}' || data[len - 1] != '\n')
+		return NULL;
+	unsigned char *b = malloc(len - 2 + (size_t)k);
+	if (!b)
+		return NULL;
+	memcpy(b, data, len - 2);
+	memcpy(b + len - 2, extra, (size_t)k);
+	*out_len = len - 2 + (size_t)k;
+	return b;
+}
+
+/* Queue one event on one subscribed connection, applying the policy. */
+static void deliver(srv *s, srv_conn *c, srv_sub *sub, ev_kind ev,
+                    const unsigned char *data, size_t len)
+{
+	unsigned char *b = NULL;
+	size_t blen = len;
+
+	if (ev == EV_ITERATION && sub->dropped > 0)
+		b = splice_dropped(data, len, sub->dropped, &blen);
+	if (c->out_bytes + blen > s->cfg.max_output_bytes) {
+		free(b);
+		if (ev == EV_PROGRESS) {
+			sub->dropped++;
+			s->events_dropped++;
+			return;
+		}
+		s->slow_consumers++;
+		srv_conn_send_error(s, c, NULL, RP_ERR_SLOW_CONSUMER,
+		                    "events for job %llu do not fit in the "
+		                    "output queue (%zu bytes queued, limit "
+		                    "%zu): read faster",
+		                    (unsigned long long)sub->job, c->out_bytes,
+		                    s->cfg.max_output_bytes);
+		return;
+	}
+	if (!b) {
+		b = malloc(len);
+		if (!b) {
+			c->dead = 1;
+			return;
+		}
+		memcpy(b, data, len);
+	} else {
+		sub->dropped = 0;
+	}
+	srv_conn_send(s, c, b, blen);
+}
+
+static void fan_out(srv *s, uint64_t job, ev_kind ev, const unsigned char *data,
+                    size_t len, uint64_t seq, uint32_t iter)
+{
+	for (srv_conn *c = s->conns; c; c = c->next) {
+		if (c->dead || c->closing)
+			continue;
+		srv_sub *sub = find_sub(c, job);
+		if (!sub)
+			continue;
+		if (ev == EV_STATE && seq <= sub->seq0)
+			continue;
+		if (ev == EV_ITERATION && iter <= sub->iter0)
+			continue;
+		deliver(s, c, sub, ev, data, len);
+	}
+}
+
+void srv_publish_event(srv *s, srv_msg *m)
+{
+	srv_job *j = srv_job_find(s, m->job);
+	if (!j)
+		return; /* deleted meanwhile */
+	if (m->ev == EV_STATE) {
+		if (m->seq > j->pub_seq) {
+			j->pub_seq = m->seq;
+			fan_out(s, m->job, EV_STATE, m->data, m->len, m->seq,
+			        0);
+		}
+		srv_job_complete_waiters(s, j);
+		return;
+	}
+	fan_out(s, m->job, m->ev, m->data, m->len, 0, m->iter);
+}
+
+void srv_publish_state_now(srv *s, srv_job *j)
+{
+	unsigned char *data;
+	size_t len;
+
+	pthread_mutex_lock(&j->mu);
+	uint64_t seq = j->state_seq;
+	json_t *ev = seq > j->pub_seq ? srv_state_event_locked(j) : NULL;
+	pthread_mutex_unlock(&j->mu);
+	if (!ev)
+		return;
+	if (rp_frame_encode(ev, NULL, 0, &data, &len) == 0) {
+		j->pub_seq = seq;
+		fan_out(s, j->id, EV_STATE, data, len, seq, 0);
+		free(data);
+	}
+	json_decref(ev);
+}
+
+/* ----------------------------------------------------------------- waiters */
+
+int srv_job_add_waiter(srv_job *j, uint64_t conn_id, json_t *id)
+{
+	job_waiter *w = calloc(1, sizeof(*w));
+	if (!w)
+		return -1;
+	w->conn_id = conn_id;
+	w->id = json_incref(id);
+	w->next = j->waiters;
+	j->waiters = w;
+	return 0;
+}
+
+void srv_job_complete_waiters(srv *s, srv_job *j)
+{
+	pthread_mutex_lock(&j->mu);
+	job_waiter *w = NULL;
+	srv_job_state st = j->state;
+	if (!j->on_worker) {
+		w = j->waiters;
+		j->waiters = NULL;
+	}
+	pthread_mutex_unlock(&j->mu);
+	while (w) {
+		job_waiter *next = w->next;
+		json_t *reply = rp_reply_ok(w->id);
+		json_object_set_new(reply, "job",
+		                    json_integer((json_int_t)j->id));
+		json_object_set_new(reply, "state",
+		                    json_string(srv_job_state_name(st)));
+		srv_reply_deferred(s, w->conn_id, reply);
+		json_decref(w->id);
+		free(w);
+		w = next;
+	}
+}
+
+void srv_publish_job_gone(srv *s, srv_job *j)
+{
+	for (srv_conn *c = s->conns; c; c = c->next) {
+		srv_sub *sub = find_sub(c, j->id);
+		if (sub) {
+			*sub = c->subs[c->nsubs - 1];
+			c->nsubs--;
+		}
+	}
+	srv_job_complete_waiters(s, j);
+}
+
+/* ------------------------------------------------------------- commands */
+
+cmd_result srv_cmd_subscribe(srv_req *r)
+{
+	srv_conn *c = r->c;
+	int failed;
+	srv_job *j = srv_req_job(r, &failed);
+	if (failed)
+		return CMD_ERROR;
+	srv_sub *sub = find_sub(c, j->id);
+	if (!sub) {
+		if (c->nsubs >= r->s->cfg.max_subscriptions)
+			return srv_req_fail(r, RP_ERR_LIMIT,
+			                    "max_subscriptions (%d) reached on "
+			                    "this connection",
+			                    r->s->cfg.max_subscriptions);
+		if (c->nsubs == c->subs_cap) {
+			int cap = c->subs_cap ? 2 * c->subs_cap : 4;
+			srv_sub *ns =
+			        realloc(c->subs, (size_t)cap * sizeof(*ns));
+			if (!ns)
+				return srv_req_fail(r, RP_ERR_NOMEM,
+				                    "out of memory");
+			c->subs = ns;
+			c->subs_cap = cap;
+		}
+		sub = &c->subs[c->nsubs++];
+		memset(sub, 0, sizeof(*sub));
+		sub->job = j->id;
+	}
+	pthread_mutex_lock(&j->mu);
+	sub->seq0 = j->state_seq;
+	sub->iter0 = j->iteration;
+	json_object_set_new(r->res, "job", json_integer((json_int_t)j->id));
+	json_object_set_new(r->res, "state",
+	                    json_string(srv_job_state_name(j->state)));
+	json_object_set_new(r->res, "iteration", json_integer(j->iteration));
+	pthread_mutex_unlock(&j->mu);
+	return CMD_REPLY;
+}
+
+cmd_result srv_cmd_unsubscribe(srv_req *r)
+{
+	uint64_t id = 0;
+	if (rp_arg_u64(r->hdr, "job", 1, &id, &r->err) != 0)
+		return CMD_ERROR;
+	srv_sub *sub = find_sub(r->c, id);
+	if (sub) {
+		*sub = r->c->subs[r->c->nsubs - 1];
+		r->c->nsubs--;
+	}
+	return CMD_REPLY;
+}

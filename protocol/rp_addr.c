@@ -1,0 +1,213 @@
+/*
+ * rp_addr.c -- daemon address parsing, shared by the daemon's listeners
+ * and the client's --connect.
+ *
+ * Accepted forms (no DNS, no sockets: pure text):
+ *   unix:PATH         a Unix socket (any non-empty path)
+ *   /abs/path, ./rel  a Unix socket (text starting with '/' or '.')
+ *   tcp:HOST:PORT     TCP; "tcp:" may prefix every TCP form below
+ *   HOST:PORT         TCP, HOST a name or an IPv4 literal
+ *   HOST              TCP on RP_DEFAULT_PORT
+ *   [V6]:PORT, [V6]   TCP, an IPv6 literal in brackets
+ *   V6                an unbracketed IPv6 literal (two or more ':'),
+ *                     default port; a port needs the brackets
+ * PORT is 0..65535 in decimal; 0 means "any" and only makes sense for a
+ * listener.  A path must fit sun_path (at most 107 bytes).
+ */
+#include "rp.h"
+
+#include <arpa/inet.h>
+#include <ctype.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <string.h>
+#include <strings.h>
+
+static void addr_err(rp_error *err, const char *fmt, ...)
+        __attribute__((format(printf, 2, 3)));
+
+static void addr_err(rp_error *err, const char *fmt, ...)
+{
+	va_list ap;
+
+	if (!err)
+		return;
+	err->code = RP_ERR_BAD_REQUEST;
+	va_start(ap, fmt);
+	vsnprintf(err->msg, sizeof err->msg, fmt, ap);
+	va_end(ap);
+}
+
+static int parse_port(const char *s, const char *text, uint16_t *port,
+                      rp_error *err)
+{
+	unsigned long v = 0;
+	size_t n = strlen(s);
+
+	if (n == 0 || n > 5 || strspn(s, "0123456789") != n) {
+		addr_err(err,
+		         "address '%.200s': port '%.16s' is not a number "
+		         "0..65535",
+		         text, s);
+		return -1;
+	}
+	for (size_t i = 0; i < n; i++)
+		v = v * 10 + (unsigned long)(s[i] - '0');
+	if (v > 65535) {
+		addr_err(err,
+		         "address '%.200s': port %lu is out of range "
+		         "0..65535",
+		         text, v);
+		return -1;
+	}
+	*port = (uint16_t)v;
+	return 0;
+}
+
+/* Host names and literals: letters, digits, '-', '.', '_', and for IPv6
+ * ':' and '%' (zone).  Spaces, '/', '@' and the rest are typos. */
+static int check_host(const char *h, size_t n, int v6, const char *text,
+                      rp_error *err)
+{
+	if (n == 0) {
+		addr_err(err, "address '%.200s': empty host", text);
+		return -1;
+	}
+	if (n > 255) {
+		addr_err(err, "address '%.60s...': host longer than 255 bytes",
+		         text);
+		return -1;
+	}
+	for (size_t i = 0; i < n; i++) {
+		unsigned char c = (unsigned char)h[i];
+		if (isalnum(c) || c == '-' || c == '.' || c == '_' ||
+		    (v6 && (c == ':' || c == '%')))
+			continue;
+		addr_err(err,
+		         "address '%.200s': character '%c' not allowed in "
+		         "a host",
+		         text, isprint(c) ? c : '?');
+		return -1;
+	}
+	return 0;
+}
+
+static int parse_unix(const char *path, const char *text, rp_addr *out,
+                      rp_error *err)
+{
+	size_t n = strlen(path);
+
+	if (n == 0) {
+		addr_err(err, "address '%.200s': empty Unix socket path", text);
+		return -1;
+	}
+	if (n >= sizeof out->path) {
+		addr_err(err,
+		         "Unix socket path of %zu bytes is too long (at "
+		         "most %zu): '%.60s...'",
+		         n, sizeof out->path - 1, path);
+		return -1;
+	}
+	out->kind = RP_ADDR_UNIX;
+	memcpy(out->path, path, n + 1);
+	return 0;
+}
+
+static int parse_tcp(const char *s, const char *text, rp_addr *out,
+                     rp_error *err)
+{
+	const char *host = s, *port = NULL, *colon;
+	size_t hlen;
+	int v6 = 0;
+
+	if (*s == '[') {
+		const char *close = strchr(s, ']');
+		if (!close) {
+			addr_err(err, "address '%.200s': '[' without ']'",
+			         text);
+			return -1;
+		}
+		host = s + 1;
+		hlen = (size_t)(close - host);
+		v6 = 1;
+		if (close[1] == ':')
+			port = close + 2;
+		else if (close[1] != '\0') {
+			addr_err(err,
+			         "address '%.200s': expected ':PORT' after "
+			         "']'",
+			         text);
+			return -1;
+		}
+	} else if ((colon = strchr(s, ':')) && strchr(colon + 1, ':')) {
+		hlen = strlen(s); /* bare IPv6 literal, default port */
+		v6 = 1;
+	} else if (colon) {
+		hlen = (size_t)(colon - s);
+		port = colon + 1;
+	} else {
+		hlen = strlen(s);
+	}
+	if (check_host(host, hlen, v6, text, err) != 0)
+		return -1;
+	out->kind = RP_ADDR_TCP;
+	memcpy(out->host, host, hlen);
+	out->host[hlen] = '\0';
+	out->port = RP_DEFAULT_PORT;
+	if (port && parse_port(port, text, &out->port, err) != 0)
+		return -1;
+	return 0;
+}
+
+int rp_addr_parse(const char *text, rp_addr *out, rp_error *err)
+{
+	rp_addr a;
+
+	memset(&a, 0, sizeof a);
+	if (!text || !*text) {
+		addr_err(err, "empty address");
+		return -1;
+	}
+	if (strncmp(text, "unix:", 5) == 0) {
+		if (parse_unix(text + 5, text, &a, err) != 0)
+			return -1;
+	} else if (text[0] == '/' || text[0] == '.') {
+		if (parse_unix(text, text, &a, err) != 0)
+			return -1;
+	} else if (parse_tcp(strncmp(text, "tcp:", 4) == 0 ? text + 4 : text,
+	                     text, &a, err) != 0) {
+		return -1;
+	}
+	*out = a;
+	return 0;
+}
+
+/*
+ * Loopback: "localhost" (any case, optional trailing dot), 127.0.0.0/8,
+ * ::1 and the IPv4-mapped ::ffff:127.x.y.z.  A Unix socket is local too
+ * (reachable only from this machine, guarded by file permissions), so it
+ * counts as loopback for the auth rule.  Anything else -- names, 0.0.0.0,
+ * "::" -- may be reachable from elsewhere.
+ */
+int rp_addr_is_loopback(const rp_addr *a)
+{
+	struct in_addr v4;
+	struct in6_addr v6;
+	static const unsigned char mapped[12] = {0, 0, 0, 0, 0,    0,
+	                                         0, 0, 0, 0, 0xff, 0xff};
+
+	if (a->kind == RP_ADDR_UNIX)
+		return 1;
+	if (strcasecmp(a->host, "localhost") == 0 ||
+	    strcasecmp(a->host, "localhost.") == 0)
+		return 1;
+	if (inet_pton(AF_INET, a->host, &v4) == 1)
+		return (ntohl(v4.s_addr) >> 24) == 127;
+	if (inet_pton(AF_INET6, a->host, &v6) == 1) {
+		if (IN6_IS_ADDR_LOOPBACK(&v6))
+			return 1;
+		return memcmp(v6.s6_addr, mapped, 12) == 0 &&
+		       v6.s6_addr[12] == 127;
+	}
+	return 0;
+}

@@ -1,0 +1,916 @@
+/*
+ * test_daemon_query.c -- scenes, queries and export on a real luxradd
+ * (PROTOCOL.md "Scenes", "Queries", "Export"):
+ *  - scene.upload of .gltf and .glb reports the counts and bounds that
+ *    luxrad-solve reports for the same file; scene.list / scene.info;
+ *  - query.points equals `luxrad-solve --points` for the same scene,
+ *    solver and options (explicit thread count: the engine is then
+ *    deterministic), for hr, rmb and progressive, converged or stepped;
+ *  - query.grid: cell centres, nu = ceil(|u|/p), the EN 12464-1 default
+ *    spacing 0.2 * 5^log10(d) capped at 10 m, min <= mean <= max, u0 =
+ *    min/mean, values equal query.points at the returned points;
+ *  - query.surfaces: one entry per mesh node, named as in the file,
+ *    min <= mean <= max, the office floor's area;
+ *  - export: a GLB (magic, version 2, length) that the Khronos validator
+ *    accepts, with COLOR_0 = lux / (lux + L_white), L_white the 99th
+ *    percentile of _ILLUMINANCE;
+ *  - scene.delete: busy while a job uses the scene; afterwards the
+ *    scene's memory is gone and the daemon total is back to its value
+ *    before the upload.
+ */
+#include <math.h>
+#include <setjmp.h>
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include <cmocka.h>
+
+#include "harness.h"
+#include "rp.h"
+
+/* Office: 4 (x) x 2.8 (y) x 3 (z) m.  Floor, desk height, walls. */
+#define NOFFICE 10
+static const double office_pts[NOFFICE * 6] = {
+        1.0,   0.0, 1.0,   0, 1, 0,  3.0,   0.0,   2.0, 0,   1,  0,
+        2.0,   0.8, 1.5,   0, 1, 0,  0.5,   0.8,   2.5, 0,   1,  0,
+        0.001, 1.5, 1.5,   1, 0, 0,  3.999, 1.5,   1.5, -1,  0,  0,
+        2.0,   1.5, 0.001, 0, 0, 1,  2.0,   2.799, 1.5, 0,   -1, 0,
+        1.0,   1.2, 2.0,   0, 0, -1, 3.5,   0.3,   0.5, 0.3, 1,  0.2,
+};
+/* Cornell: 0.556 x 0.549 x 0.559 m. */
+#define NCORNELL 6
+static const double cornell_pts[NCORNELL * 6] = {
+        0.1,   0.0,  0.1,   0,  1, 0, 0.45,  0.0,   0.45, 0, 1,  0,
+        0.278, 0.27, 0.001, 0,  0, 1, 0.001, 0.27,  0.3,  1, 0,  0,
+        0.554, 0.27, 0.3,   -1, 0, 0, 0.278, 0.548, 0.1,  0, -1, 0,
+};
+
+static char *tmp_file(const char *suffix, const void *data, size_t len)
+{
+	char *path = malloc(64);
+	snprintf(path, 64, "/tmp/luxradd-q-XXXXXX%s", suffix);
+	int fd = mkstemps(path, (int)strlen(suffix));
+	if (fd < 0)
+		fail_msg("mkstemps");
+	if (write(fd, data, len) != (ssize_t)len)
+		fail_msg("write %s", path);
+	close(fd);
+	return path;
+}
+
+/* Run luxrad-solve --json; returns its parsed output. */
+static json_t *solve_cli(const char *scene, const char *args, const double *pts,
+                         size_t n)
+{
+	char *text = malloc(n * 160 + 16);
+	size_t off = 0;
+	for (size_t i = 0; i < n; i++)
+		off += (size_t)sprintf(
+		        text + off, "%.17g %.17g %.17g %.17g %.17g %.17g\n",
+		        pts[6 * i], pts[6 * i + 1], pts[6 * i + 2],
+		        pts[6 * i + 3], pts[6 * i + 4], pts[6 * i + 5]);
+	char *pf = tmp_file(".pts", text, off);
+	free(text);
+	char cmd[2048];
+	snprintf(cmd, sizeof(cmd),
+	         "'%s/luxrad-solve' '%s' --json --points '%s' %s 2>/dev/null",
+	         LUXRAD_BINARY_DIR, scene, pf, args);
+	char *out = NULL;
+	int rc = dm_run(cmd, &out);
+	unlink(pf);
+	free(pf);
+	if (rc != 0)
+		fail_msg("%s: exit %d", cmd, rc);
+	json_error_t je;
+	json_t *j = json_loads(out, 0, &je);
+	free(out);
+	if (!j)
+		fail_msg("luxrad-solve output: %s", je.text);
+	return j;
+}
+
+/* ------------------------------------------------------------- scenes */
+
+static void test_upload_reports_what_luxrad_solve_reports(void **state)
+{
+	(void)state;
+	dm_daemon *d = dm_start(NULL);
+	dm_conn *c = dm_open(d, NULL);
+	const char *files[3];
+	char p0[512], p1[512], p2[512];
+	files[0] = dm_sample("cornell.gltf", p0, sizeof(p0));
+	files[1] = dm_sample("office.gltf", p1, sizeof(p1));
+	files[2] = dm_gen_scene("hall-empty.glb", "hall-empty", p2, sizeof(p2));
+	static const char *const counts[] = {"triangles_in",
+	                                     "triangles_nonfinite",
+	                                     "triangles_degenerate",
+	                                     "polygons",
+	                                     "quads",
+	                                     "materials",
+	                                     "materials_offered",
+	                                     "lights",
+	                                     "emitters",
+	                                     "nodes",
+	                                     NULL};
+	json_t *ids[3];
+	for (int f = 0; f < 3; f++) {
+		size_t len;
+		unsigned char *b = dm_read_file(files[f], &len);
+		char name[32];
+		snprintf(name, sizeof(name), "scene-%d", f);
+		json_t *r = dm_call_payload(c, b, len, "{s:s, s:s}", "cmd",
+		                            "scene.upload", "name", name);
+		free(b);
+		if (strcmp(dm_err_code(r), ""))
+			fail_msg("upload %s: %s", files[f], dm_err_code(r));
+		ids[f] = json_incref(dm_get(r, "scene"));
+		assert_string_equal(json_string_value(dm_get(r, "name")), name);
+		/* The size is "size_bytes": a top-level "bytes" would announce
+		 * a payload (PROTOCOL.md 5.3). */
+		assert_int_equal(dm_int(r, "size_bytes"), (long long)len);
+		assert_null(json_object_get(r, "bytes"));
+		assert_true(dm_int(r, "memory_bytes") > 0);
+		assert_true(json_is_string(dm_get(r, "warnings")));
+		json_t *ref = solve_cli(files[f], "--iterations 1 --threads 1",
+		                        NULL, 0);
+		json_t *rs = dm_get(ref, "scene");
+		json_t *rc = dm_get(r, "counts");
+		for (int k = 0; counts[k]; k++)
+			if (dm_int(rc, counts[k]) != dm_int(rs, counts[k]))
+				fail_msg("%s: counts.%s %lld, luxrad-solve "
+				         "says %lld",
+				         files[f], counts[k],
+				         dm_int(rc, counts[k]),
+				         dm_int(rs, counts[k]));
+		json_t *bd = dm_get(r, "bounds");
+		for (int k = 0; k < 3; k++) {
+			double lo = json_number_value(
+			        json_array_get(dm_get(bd, "min"), k));
+			double hi = json_number_value(
+			        json_array_get(dm_get(bd, "max"), k));
+			double rlo = json_number_value(
+			        json_array_get(dm_get(rs, "bounds_min"), k));
+			double rhi = json_number_value(
+			        json_array_get(dm_get(rs, "bounds_max"), k));
+			assert_true(dm_close_enough(lo, rlo, 1e-9));
+			assert_true(dm_close_enough(hi, rhi, 1e-9));
+		}
+		json_decref(ref);
+		/* scene.info = the upload result plus jobs. */
+		json_t *info = dm_ok(c, "{s:s, s:O}", "cmd", "scene.info",
+		                     "scene", ids[f]);
+		assert_true(json_equal(dm_get(info, "counts"), rc));
+		assert_int_equal(json_array_size(dm_get(info, "jobs")), 0);
+		json_decref(info);
+		json_decref(r);
+	}
+	/* Default names: scene-<id>, job-<id>. */
+	size_t blen;
+	unsigned char *b = dm_read_file(files[0], &blen);
+	json_t *r = dm_call_payload(c, b, blen, "{s:s}", "cmd", "scene.upload");
+	free(b);
+	char want[64];
+	snprintf(want, sizeof(want), "scene-%lld", dm_int(r, "scene"));
+	assert_string_equal(json_string_value(dm_get(r, "name")), want);
+	json_t *js = dm_job_create(c, dm_get(r, "scene"), NULL, NULL);
+	json_t *ji = dm_ok(c, "{s:s, s:O}", "cmd", "job.info", "job", js);
+	snprintf(want, sizeof(want), "job-%lld",
+	         (long long)json_integer_value(js));
+	assert_string_equal(
+	        json_string_value(dm_get(dm_get(ji, "job"), "name")), want);
+	assert_string_equal(
+	        json_string_value(dm_get(dm_get(ji, "job"), "solver")), "hr");
+	json_decref(ji);
+	json_decref(js);
+	json_decref(r);
+
+	/* The README's figures for the Cornell box. */
+	json_t *info =
+	        dm_ok(c, "{s:s, s:O}", "cmd", "scene.info", "scene", ids[0]);
+	assert_int_equal(dm_int(dm_get(info, "counts"), "triangles_in"), 32);
+	assert_int_equal(dm_int(dm_get(info, "counts"), "polygons"), 21);
+	json_decref(info);
+
+	json_t *l = dm_ok(c, "{s:s}", "cmd", "scene.list");
+	json_t *sl = dm_get(l, "scenes");
+	assert_int_equal(json_array_size(sl), 4);
+	static const char *const lk[] = {"id",       "name", "bytes",
+	                                 "polygons", "jobs", "memory_bytes",
+	                                 "created",  NULL};
+	for (int f = 0; f < 3; f++) {
+		int found = 0;
+		for (size_t i = 0; i < 4; i++) {
+			json_t *e = json_array_get(sl, i);
+			for (int k = 0; lk[k]; k++)
+				dm_get(e, lk[k]);
+			found += json_equal(dm_get(e, "id"), ids[f]);
+		}
+		assert_int_equal(found, 1);
+	}
+	json_decref(l);
+	for (int f = 0; f < 3; f++)
+		json_decref(ids[f]);
+	dm_pass();
+}
+
+/* ------------------------------------------------------------- points */
+
+static void compare_with_cli(dm_conn *c, const char *scene_path,
+                             const char *solver, int iterations,
+                             const double *pts, size_t n)
+{
+	json_t *sc = dm_upload_file(c, scene_path, solver);
+	json_t *opt = json_pack(
+	        "{s:i, s:f, s:f, s:f, s:i, s:i, s:f, s:i}", "threads", 1, "eps",
+	        1e-4, "variation", 0.5, "min_edge_rel", 0.005, "rcv_samples", 4,
+	        "vis_samples", 4, "tol", 1e-3, "max_iterations", 100);
+	json_t *job = dm_job_create(c, sc, solver, opt);
+	json_decref(opt);
+	if (iterations)
+		json_decref(dm_ok(c, "{s:s, s:O, s:i}", "cmd", "job.run", "job",
+		                  job, "iterations", iterations));
+	else
+		json_decref(dm_ok(c, "{s:s, s:O, s:b}", "cmd", "job.run", "job",
+		                  job, "converge", 1));
+	json_decref(dm_wait_job(c, job, iterations ? "paused|done" : "done",
+	                        150000));
+	double lux[16];
+	long long it = dm_query_points(c, job, pts, n, lux);
+
+	char args[512];
+	snprintf(args, sizeof(args),
+	         "--solver %s --threads 1 --eps 1e-4 --variation 0.5 "
+	         "--min-edge 0.005 --rcv-samples 4 --vis-samples 4 %s",
+	         solver,
+	         iterations ? "" : "--converge 1e-3 --max-iterations 100");
+	if (iterations) {
+		size_t l = strlen(args);
+		snprintf(args + l, sizeof(args) - l, "--iterations %d",
+		         iterations);
+	}
+	json_t *ref = solve_cli(scene_path, args, pts, n);
+	assert_int_equal(it, dm_int(ref, "iterations"));
+	json_t *rl = dm_get(ref, "illuminance_lux");
+	for (size_t i = 0; i < n; i++) {
+		double want = json_number_value(json_array_get(rl, i));
+		if (!dm_close_enough(lux[i], want, 1e-9))
+			fail_msg("%s on %s, point %zu: daemon %.17g lux, "
+			         "luxrad-solve %.17g",
+			         solver, scene_path, i, lux[i], want);
+	}
+	json_decref(ref);
+	json_decref(job);
+	json_decref(sc);
+}
+
+static void test_query_points_equal_luxrad_solve(void **state)
+{
+	(void)state;
+	dm_daemon *d = dm_start(NULL);
+	dm_conn *c = dm_open(d, NULL);
+	char p[512];
+	compare_with_cli(c, dm_sample("office.gltf", p, sizeof(p)), "hr", 0,
+	                 office_pts, NOFFICE);
+	compare_with_cli(c, dm_sample("cornell.gltf", p, sizeof(p)), "hr", 0,
+	                 cornell_pts, NCORNELL);
+	compare_with_cli(c, dm_sample("cornell.gltf", p, sizeof(p)), "rmb", 0,
+	                 cornell_pts, NCORNELL);
+	compare_with_cli(c, dm_sample("office.gltf", p, sizeof(p)),
+	                 "progressive", 3, office_pts, NOFFICE);
+	compare_with_cli(c, dm_sample("office.gltf", p, sizeof(p)), "hr", 2,
+	                 office_pts, NOFFICE);
+	dm_pass();
+}
+
+/* ---------------------------------------------------------- pipelining */
+
+/*
+ * PROTOCOL.md 3: the requests of one connection are answered in the order
+ * received, even when the later ones are quicker (a status after a
+ * query.points of many points, run on the query threads).
+ */
+static void test_pipelined_requests_are_answered_in_order(void **state)
+{
+	(void)state;
+	const char *args[] = {"--query-threads", "2", NULL};
+	dm_daemon *d = dm_start(args);
+	dm_conn *c = dm_open(d, NULL);
+	char p[512];
+	json_t *sc = dm_upload_file(c, dm_sample("office.gltf", p, sizeof(p)),
+	                            "office");
+	json_t *opt = json_pack("{s:i}", "threads", 1);
+	json_t *job = dm_job_create(c, sc, "hr", opt);
+	json_decref(opt);
+	json_decref(dm_ok(c, "{s:s, s:O, s:b}", "cmd", "job.run", "job", job,
+	                  "converge", 1));
+	json_decref(dm_wait_job(c, job, "done", 150000));
+
+	json_t *heavy = json_array(); /* ~0.3 s of work */
+	for (int i = 0; i < 300; i++)
+		json_array_append_new(heavy,
+		                      json_pack("[f,f,f,i,i,i]", 0.2 + 0.01 * i,
+		                                0.8, 1.5, 0, 1, 0));
+	json_t *light = json_pack("[[f,f,f,i,i,i]]", 2.0, 0.0, 1.5, 0, 1, 0);
+	enum { N = 24 };
+	unsigned char *all = NULL;
+	size_t all_len = 0;
+	for (int k = 0; k < N; k++) {
+		json_t *h;
+		switch (k % 4) {
+		case 0:
+			h = json_pack("{s:s, s:O, s:O}", "cmd", "query.points",
+			              "job", job, "points", heavy);
+			break;
+		case 1:
+			h = json_pack("{s:s}", "cmd", "status");
+			break;
+		case 2:
+			h = json_pack("{s:s, s:O, s:O}", "cmd", "query.points",
+			              "job", job, "points", light);
+			break;
+		default:
+			h = json_pack("{s:s, s:O}", "cmd", "job.info", "job",
+			              job);
+		}
+		json_object_set_new(h, "id", json_integer(1000 + k));
+		unsigned char *f;
+		size_t flen;
+		assert_int_equal(rp_frame_encode(h, NULL, 0, &f, &flen), 0);
+		json_decref(h);
+		all = realloc(all, all_len + flen);
+		memcpy(all + all_len, f, flen);
+		all_len += flen;
+		free(f);
+	}
+	assert_int_equal(dm_send_raw(c, all, all_len), 0);
+	free(all);
+	for (int k = 0; k < N; k++) {
+		json_t *f = NULL;
+		if (dm_recv(c, DM_REPLY_MS, &f, NULL, NULL) != 1)
+			fail_msg("pipelined reply %d missing", k);
+		if (json_integer_value(json_object_get(f, "id")) != 1000 + k)
+			fail_msg("pipelined reply %d carries id %lld: replies "
+			         "out of order",
+			         k,
+			         (long long)json_integer_value(
+			                 json_object_get(f, "id")));
+		assert_string_equal(dm_err_code(f), "");
+		if (k % 4 == 0)
+			assert_int_equal(json_array_size(dm_get(f, "lux")),
+			                 300);
+		json_decref(f);
+	}
+	json_decref(heavy);
+	json_decref(light);
+	json_decref(job);
+	json_decref(sc);
+	dm_pass();
+}
+
+/* --------------------------------------------------------------- grid */
+
+static json_t *solved_office(dm_conn *c, json_t **scene)
+{
+	char p[512];
+	*scene = dm_upload_file(c, dm_sample("office.gltf", p, sizeof(p)),
+	                        "office");
+	json_t *opt = json_pack("{s:i}", "threads", 1);
+	json_t *job = dm_job_create(c, *scene, "hr", opt);
+	json_decref(opt);
+	json_decref(dm_ok(c, "{s:s, s:O, s:b}", "cmd", "job.run", "job", job,
+	                  "converge", 1));
+	json_decref(dm_wait_job(c, job, "done", 150000));
+	return job;
+}
+
+static double en12464_spacing(double d)
+{
+	double p = 0.2 * pow(5.0, log10(d));
+	return p > 10 ? 10 : p;
+}
+
+/* Check one grid answer; returns nothing, fails on any inconsistency. */
+static void check_grid(dm_conn *c, const json_t *job, const double o[3],
+                       const double u[3], const double v[3], const double n[3],
+                       double spacing, double want_p)
+{
+	json_t *h = json_pack("{s:s, s:O, s:[f,f,f], s:[f,f,f], s:[f,f,f], "
+	                      "s:b}",
+	                      "cmd", "query.grid", "job", job, "origin", o[0],
+	                      o[1], o[2], "u", u[0], u[1], u[2], "v", v[0],
+	                      v[1], v[2], "points", 1);
+	if (n)
+		json_object_set_new(h, "normal",
+		                    json_pack("[f,f,f]", n[0], n[1], n[2]));
+	if (spacing > 0)
+		json_object_set_new(h, "spacing", json_real(spacing));
+	char *req = json_dumps(h, JSON_COMPACT);
+	/* Send through dm_call's path: a format of one object. */
+	json_t *r = dm_call(c, "O", h);
+	json_decref(h);
+	if (strcmp(dm_err_code(r), ""))
+		fail_msg("%s: error %s", req, dm_err_code(r));
+	double lu = sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]);
+	double lv = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+	double p = dm_num(r, "spacing");
+	if (!dm_close_enough(p, want_p, 1e-9))
+		fail_msg("%s: spacing %.17g, want %.17g", req, p, want_p);
+	long long nu = dm_int(r, "nu"), nv = dm_int(r, "nv");
+	if (nu != (long long)ceil(lu / want_p - 1e-9) ||
+	    nv != (long long)ceil(lv / want_p - 1e-9))
+		fail_msg("%s: nu %lld nv %lld, want %g %g", req, nu, nv,
+		         ceil(lu / want_p), ceil(lv / want_p));
+	json_t *lux = dm_get(r, "lux"), *pts = dm_get(r, "points");
+	size_t cnt = (size_t)(nu * nv);
+	assert_int_equal(json_array_size(lux), cnt);
+	assert_int_equal(json_array_size(pts), cnt);
+	double mn = INFINITY, mx = -INFINITY, sum = 0;
+	double *q = malloc(cnt * 6 * sizeof(double));
+	double nn[3];
+	if (n)
+		memcpy(nn, n, sizeof(nn));
+	else {
+		nn[0] = u[1] * v[2] - u[2] * v[1];
+		nn[1] = u[2] * v[0] - u[0] * v[2];
+		nn[2] = u[0] * v[1] - u[1] * v[0];
+	}
+	for (size_t i = 0; i < cnt; i++) {
+		double l = json_number_value(json_array_get(lux, i));
+		mn = fmin(mn, l);
+		mx = fmax(mx, l);
+		sum += l;
+		/* Row-major, nu per row: column along u, row along v. */
+		size_t col = i % (size_t)nu, row = i / (size_t)nu;
+		double s = (col + 0.5) / (double)nu,
+		       t = (row + 0.5) / (double)nv;
+		json_t *pt = json_array_get(pts, i);
+		for (int k = 0; k < 3; k++) {
+			double want = o[k] + s * u[k] + t * v[k];
+			double got = json_number_value(json_array_get(pt, k));
+			if (fabs(got - want) > 1e-9)
+				fail_msg(
+				        "%s: point %zu coordinate %d is %.17g, "
+				        "want the cell centre %.17g",
+				        req, i, k, got, want);
+			q[6 * i + k] = got;
+			q[6 * i + 3 + k] = nn[k];
+		}
+	}
+	double mean = sum / (double)cnt;
+	assert_true(dm_close_enough(dm_num(r, "min"), mn, 1e-12));
+	assert_true(dm_close_enough(dm_num(r, "max"), mx, 1e-12));
+	assert_true(dm_close_enough(dm_num(r, "mean"), mean, 1e-9));
+	assert_true(mn <= mean && mean <= mx);
+	if (mean > 0)
+		assert_true(dm_close_enough(dm_num(r, "u0"), mn / mean, 1e-9));
+	/* The grid's lux are the lux at its points. */
+	double *pl = malloc(cnt * sizeof(double));
+	dm_query_points(c, job, q, cnt, pl);
+	for (size_t i = 0; i < cnt; i++) {
+		double l = json_number_value(json_array_get(lux, i));
+		if (!dm_close_enough(l, pl[i], 1e-9))
+			fail_msg("%s: grid lux[%zu] %.17g, query.points %.17g",
+			         req, i, l, pl[i]);
+	}
+	free(pl);
+	free(q);
+	free(req);
+	json_decref(r);
+}
+
+static void test_query_grid_cells_spacing_and_uniformity(void **state)
+{
+	(void)state;
+	dm_daemon *d = dm_start(NULL);
+	dm_conn *c = dm_open(d, NULL);
+	json_t *sc;
+	json_t *job = solved_office(c, &sc);
+
+	/* The work plane at 0.8 m: u along z, v along x (u x v = +y). */
+	const double o[3] = {0.2, 0.8, 0.2}, u[3] = {0, 0, 2.6},
+	             v[3] = {3.6, 0, 0};
+	check_grid(c, job, o, u, v, NULL, 0, en12464_spacing(3.6));
+	check_grid(c, job, o, u, v, NULL, 1.0, 1.0);
+	const double down[3] = {0, -1, 0};
+	check_grid(c, job, o, u, v, down, 0.7, 0.7);
+	/* The floor, 4 x 3 m: d = 4. */
+	const double fo[3] = {0, 0, 0}, fu[3] = {0, 0, 3}, fv[3] = {4, 0, 0};
+	check_grid(c, job, fo, fu, fv, NULL, 0, en12464_spacing(4));
+	/* A wall, longer side 2.8 m: u along y, v along x (u x v = -z). */
+	const double wo[3] = {0, 0, 2.999}, wu[3] = {0, 2.8, 0},
+	             wv[3] = {2.5, 0, 0};
+	check_grid(c, job, wo, wu, wv, NULL, 0, en12464_spacing(2.8));
+
+	/* Spacing is capped at 10 m: a 2 km strip (d = 2000). */
+	json_t *r = dm_ok(c, "{s:s, s:O, s:[f,f,f], s:[f,f,f], s:[f,f,f]}",
+	                  "cmd", "query.grid", "job", job, "origin", 0.0, 0.01,
+	                  0.0, "u", 0.0, 0.0, 1.0, "v", 2000.0, 0.0, 0.0);
+	assert_true(dm_close_enough(dm_num(r, "spacing"), 10.0, 1e-12));
+	assert_int_equal(dm_int(r, "nv"), 200);
+	assert_int_equal(dm_int(r, "nu"), 1);
+	assert_null(json_object_get(r, "points")); /* not asked for */
+	json_decref(r);
+	json_decref(job);
+	json_decref(sc);
+	dm_pass();
+}
+
+/* ----------------------------------------------------------- surfaces */
+
+static void test_query_surfaces_per_node(void **state)
+{
+	(void)state;
+	dm_daemon *d = dm_start(NULL);
+	dm_conn *c = dm_open(d, NULL);
+	json_t *sc;
+	json_t *job = solved_office(c, &sc);
+	json_t *r = dm_ok(c, "{s:s, s:O}", "cmd", "query.surfaces", "job", job);
+	json_t *s = dm_get(r, "surfaces");
+	static const char *const meshes[] = {
+	        "floor",       "ceiling", "walls", "luminaire_1",
+	        "luminaire_2", "desk",    "chair", NULL};
+	int seen[7] = {0};
+	size_t i;
+	json_t *e;
+	json_array_foreach(s, i, e)
+	{
+		dm_int(e, "node");
+		const char *name = json_string_value(dm_get(e, "name"));
+		double area = dm_num(e, "area"), mn = dm_num(e, "min"),
+		       mean = dm_num(e, "mean"), mx = dm_num(e, "max");
+		int k;
+		for (k = 0; meshes[k]; k++)
+			if (name && !strcmp(name, meshes[k]))
+				break;
+		if (!meshes[k])
+			fail_msg("surface \"%s\" is not a mesh node of "
+			         "office.gltf",
+			         name ? name : "(null)");
+		seen[k]++;
+		if (!(area > 0))
+			fail_msg("%s: area %g", name, area);
+		if (!(mn <= mean && mean <= mx && mn >= 0))
+			fail_msg("%s: min %g mean %g max %g", name, mn, mean,
+			         mx);
+		if (!strcmp(name, "floor") && fabs(area - 12.0) > 0.06)
+			fail_msg("floor area %g m2, want 12", area);
+		if (!strcmp(name, "ceiling") && fabs(area - 12.0) > 0.06)
+			fail_msg("ceiling area %g m2, want 12", area);
+		if (!strncmp(name, "luminaire", 9) &&
+		    fabs(area - 0.36) > 0.01 && fabs(area - 0.72) > 0.01)
+			fail_msg("%s area %g m2, want 0.36 (one side) or "
+			         "0.72",
+			         name, area);
+	}
+	for (int k = 0; meshes[k]; k++)
+		if (seen[k] != 1)
+			fail_msg("node %s appears %d times in query.surfaces",
+			         meshes[k], seen[k]);
+	assert_int_equal(json_array_size(s), 7);
+	json_decref(r);
+	json_decref(job);
+	json_decref(sc);
+	dm_pass();
+}
+
+/* ------------------------------------------------------------- export */
+
+static uint32_t le32(const unsigned char *p)
+{
+	return (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 |
+	       (uint32_t)p[3] << 24;
+}
+
+/* Read component k of element i of a glTF accessor from the BIN chunk,
+ * as a double (float, or normalized unsigned byte / short). */
+static double acc_get(const json_t *doc, const unsigned char *bin,
+                      size_t binlen, const json_t *acc, size_t i, int k)
+{
+	const char *type = json_string_value(dm_get(acc, "type"));
+	int ncomp = !strcmp(type, "SCALAR") ? 1
+	            : !strcmp(type, "VEC2") ? 2
+	            : !strcmp(type, "VEC3") ? 3
+	            : !strcmp(type, "VEC4") ? 4
+	                                    : 0;
+	assert_true(ncomp > 0 && k < ncomp);
+	long long ct = dm_int(acc, "componentType");
+	size_t csize = ct == 5126 ? 4 : ct == 5123 ? 2 : ct == 5121 ? 1 : 0;
+	if (!csize)
+		fail_msg("accessor componentType %lld not handled", ct);
+	json_t *bv = json_array_get(dm_get(doc, "bufferViews"),
+	                            (size_t)dm_int(acc, "bufferView"));
+	json_t *o = json_object_get(bv, "byteOffset");
+	json_t *ao = json_object_get(acc, "byteOffset");
+	json_t *st = json_object_get(bv, "byteStride");
+	size_t stride =
+	        st ? (size_t)json_integer_value(st) : (size_t)ncomp * csize;
+	size_t off = (o ? (size_t)json_integer_value(o) : 0) +
+	             (ao ? (size_t)json_integer_value(ao) : 0) + i * stride +
+	             (size_t)k * csize;
+	if (off + csize > binlen)
+		fail_msg("accessor reads past the BIN chunk");
+	const unsigned char *p = bin + off;
+	if (ct == 5126) {
+		float f;
+		memcpy(&f, p, 4);
+		return f;
+	}
+	if (ct == 5123)
+		return (p[0] | p[1] << 8) / 65535.0;
+	return p[0] / 255.0;
+}
+
+static int cmp_dbl(const void *a, const void *b)
+{
+	double x = *(const double *)a, y = *(const double *)b;
+	return x < y ? -1 : x > y;
+}
+
+/*
+ * PROTOCOL.md 5.18: COLOR_0 = lux / (lux + L_white), L_white the 99th
+ * percentile of the vertex illuminance (_ILLUMINANCE): one grey per
+ * vertex, one white point for the file.
+ */
+static void check_tone_map(const json_t *doc, const unsigned char *bin,
+                           size_t binlen)
+{
+	size_t nv = 0, nw = 0, cap = 1024;
+	double *lux = malloc(cap * sizeof(double));
+	double *white = malloc(cap * sizeof(double));
+	size_t i, k;
+	json_t *m, *prim;
+	json_array_foreach(dm_get(doc, "meshes"), i, m)
+	{
+		json_array_foreach(dm_get(m, "primitives"), k, prim)
+		{
+			json_t *at = dm_get(prim, "attributes");
+			json_t *accs = dm_get(doc, "accessors");
+			json_t *ai = json_array_get(
+			        accs, (size_t)dm_int(at, "_ILLUMINANCE"));
+			json_t *ac = json_array_get(
+			        accs, (size_t)dm_int(at, "COLOR_0"));
+			size_t n = (size_t)dm_int(ai, "count");
+			assert_int_equal(dm_int(ac, "count"), n);
+			for (size_t v = 0; v < n; v++) {
+				double e = acc_get(doc, bin, binlen, ai, v, 0);
+				double c[3];
+				for (int ch = 0; ch < 3; ch++)
+					c[ch] = acc_get(doc, bin, binlen, ac, v,
+					                ch);
+				if (!(e >= 0) || !isfinite(e))
+					fail_msg("_ILLUMINANCE %g", e);
+				for (int ch = 0; ch < 3; ch++)
+					if (!(c[ch] >= 0 && c[ch] <= 1))
+						fail_msg("COLOR_0 %g", c[ch]);
+				if (nv == cap || nw == cap) {
+					cap *= 2;
+					lux = realloc(lux,
+					              cap * sizeof(double));
+					white = realloc(white,
+					                cap * sizeof(double));
+				}
+				lux[nv++] = e;
+				if (fabs(c[0] - c[1]) > 2e-3 ||
+				    fabs(c[0] - c[2]) > 2e-3)
+					fail_msg(
+					        "COLOR_0 (%g, %g, %g) is not "
+					        "the "
+					        "grey lux / (lux + L_white) of "
+					        "PROTOCOL.md 5.18 (vertex with "
+					        "%g lux)",
+					        c[0], c[1], c[2], e);
+				if (c[0] > 0.02 && c[0] < 0.98 && e > 0)
+					white[nw++] = e * (1 - c[0]) / c[0];
+			}
+		}
+	}
+	assert_true(nv > 0 && nw > 0);
+	qsort(lux, nv, sizeof(double), cmp_dbl);
+	qsort(white, nw, sizeof(double), cmp_dbl);
+	double w = white[nw / 2];
+	for (size_t j = 0; j < nw; j++)
+		if (fabs(white[j] - w) > 0.01 * w)
+			fail_msg("COLOR_0 implies white points from %g to %g "
+			         "lux: not one L_white",
+			         white[0], white[nw - 1]);
+	double p98 = lux[(size_t)(0.98 * (double)(nv - 1))];
+	double p995 = lux[(size_t)(0.995 * (double)(nv - 1))];
+	if (w < p98 * 0.99 || w > p995 * 1.01)
+		fail_msg("L_white %g lux is not the 99th percentile of the "
+		         "vertex illuminance (98th %g, 99.5th %g)",
+		         w, p98, p995);
+	free(lux);
+	free(white);
+}
+
+/* Export the solved office and check the GLB; tone_map: also check the
+ * colour mapping (after the validator, so that both are reported). */
+static void export_office(int tone_map)
+{
+	dm_daemon *d = dm_start(NULL);
+	dm_conn *c = dm_open(d, NULL);
+	char p[512];
+	json_t *sc = dm_upload_file(c, dm_sample("cornell.gltf", p, sizeof(p)),
+	                            "cornell");
+	json_t *job = dm_job_create(c, sc, "hr", NULL);
+	json_decref(
+	        dm_err(c, "state", "{s:s, s:O}", "cmd", "export", "job", job));
+	json_decref(job);
+	json_decref(sc);
+	job = solved_office(c, &sc);
+
+	json_t *r = dm_ok(c, "{s:s, s:O, s:s}", "cmd", "export", "job", job,
+	                  "format", "glb");
+	size_t n = c->payload_len;
+	const unsigned char *g = c->payload;
+	assert_int_equal(dm_int(r, "bytes"), (long long)n);
+	assert_true(dm_int(r, "vertices") > 0);
+	assert_true(dm_int(r, "triangles") > 0);
+	assert_true(dm_int(r, "iteration") > 0);
+	if (n < 20 || memcmp(g, "glTF", 4) != 0)
+		fail_msg("export payload (%zu bytes) does not start with "
+		         "\"glTF\"",
+		         n);
+	assert_int_equal(le32(g + 4), 2);
+	assert_int_equal(le32(g + 8), n);
+	/* First chunk: JSON. */
+	uint32_t jlen = le32(g + 12);
+	assert_int_equal(le32(g + 16), 0x4E4F534A); /* "JSON" */
+	assert_true(20 + (size_t)jlen <= n);
+	json_error_t je;
+	json_t *doc = json_loadb((const char *)g + 20, jlen, 0, &je);
+	if (!doc)
+		fail_msg("GLB JSON chunk: %s", je.text);
+	json_t *meshes = dm_get(doc, "meshes");
+	assert_true(json_array_size(meshes) >= 7); /* one per node */
+	long long verts = 0;
+	size_t i;
+	json_t *m;
+	json_array_foreach(meshes, i, m)
+	{
+		size_t k;
+		json_t *prim;
+		json_array_foreach(dm_get(m, "primitives"), k, prim)
+		{
+			json_t *at = dm_get(prim, "attributes");
+			dm_get(at, "COLOR_0");
+			dm_get(at, "_ILLUMINANCE");
+			long long pos = dm_int(at, "POSITION");
+			verts += dm_int(json_array_get(dm_get(doc, "accessors"),
+			                               (size_t)pos),
+			                "count");
+		}
+	}
+	assert_int_equal(verts, dm_int(r, "vertices"));
+	/* Second chunk: BIN. */
+	size_t bo = 20 + (size_t)jlen;
+	assert_true(bo + 8 <= n);
+	assert_int_equal(le32(g + bo + 4), 0x004E4942); /* "BIN\0" */
+	size_t blen = le32(g + bo);
+	assert_true(bo + 8 + blen <= n);
+	const unsigned char *bin = g + bo + 8;
+
+	char *path = tmp_file(".glb", g, n);
+	char cmd[1024];
+	snprintf(cmd, sizeof(cmd),
+	         "node '%s/tests/tools/validate_gltf.js' '%s' 2>&1",
+	         LUXRAD_SOURCE_DIR, path);
+	char *out = NULL;
+	int rc = dm_run(cmd, &out);
+	if (rc != 0)
+		fail_msg("the glTF validator refuses the export (exit %d):\n%s",
+		         rc, out);
+	free(out);
+	unlink(path);
+	free(path);
+	if (tone_map)
+		check_tone_map(doc, bin, blen);
+	json_decref(doc);
+	json_decref(r);
+	json_decref(job);
+	json_decref(sc);
+	dm_pass();
+}
+
+/* ------------------------------------------------------- scene memory */
+
+static void test_export_is_a_valid_glb(void **state)
+{
+	(void)state;
+	export_office(0);
+}
+
+static void test_export_colour_is_tone_mapped_lux(void **state)
+{
+	(void)state;
+	export_office(1);
+}
+
+static json_t *memory_of(dm_conn *c)
+{
+	json_t *r = dm_ok(c, "{s:s}", "cmd", "status");
+	json_t *m = json_incref(dm_get(r, "memory"));
+	json_decref(r);
+	return m;
+}
+
+static void test_scene_delete_releases_its_memory(void **state)
+{
+	(void)state;
+	dm_daemon *d = dm_start(NULL);
+	dm_conn *c = dm_open(d, NULL);
+	json_t *m0 = memory_of(c);
+
+	char p[512];
+	json_t *sc = dm_upload_file(
+	        c, dm_gen_scene("hall-empty.glb", "hall-empty", p, sizeof(p)),
+	        "hall");
+	json_t *m1 = memory_of(c);
+	if (!(dm_int(m1, "total_bytes") > dm_int(m0, "total_bytes")))
+		fail_msg("status memory did not grow with a scene");
+	json_t *r = dm_ok(c, "{s:s}", "cmd", "status");
+	int listed = 0;
+	size_t i;
+	json_t *e;
+	json_array_foreach(dm_get(r, "scenes"), i, e)
+	{
+		if (json_equal(dm_get(e, "id"), sc)) {
+			listed = 1;
+			assert_true(dm_int(e, "memory_bytes") > 0);
+		}
+	}
+	assert_true(listed);
+	json_decref(r);
+
+	/* Busy while a job uses it, whatever the job's state. */
+	json_t *opt = json_pack("{s:i}", "threads", 1);
+	json_t *job = dm_job_create(c, sc, "hr", opt);
+	json_decref(dm_err(c, "busy", "{s:s, s:O}", "cmd", "scene.delete",
+	                   "scene", sc));
+	json_decref(dm_ok(c, "{s:s, s:O, s:b}", "cmd", "job.run", "job", job,
+	                  "converge", 1));
+	json_decref(dm_err(c, "busy", "{s:s, s:O}", "cmd", "scene.delete",
+	                   "scene", sc));
+	json_decref(dm_wait_job(c, job, "done", 150000));
+	json_t *info = dm_ok(c, "{s:s, s:O}", "cmd", "scene.info", "scene", sc);
+	assert_int_equal(json_array_size(dm_get(info, "jobs")), 1);
+	json_decref(info);
+	json_decref(dm_err(c, "busy", "{s:s, s:O}", "cmd", "scene.delete",
+	                   "scene", sc));
+	json_decref(dm_ok(c, "{s:s, s:O}", "cmd", "job.delete", "job", job));
+	json_decref(dm_ok(c, "{s:s, s:O}", "cmd", "scene.delete", "scene", sc));
+
+	json_t *m2 = memory_of(c);
+	if (dm_int(m2, "total_bytes") != dm_int(m0, "total_bytes")) {
+		char *a = json_dumps(m0, JSON_COMPACT);
+		char *b = json_dumps(m2, JSON_COMPACT);
+		fail_msg("memory after scene.delete differs from before the "
+		         "upload:\nbefore %s\nafter  %s",
+		         a, b);
+	}
+	assert_true(json_equal(dm_get(m2, "by_kind"), dm_get(m0, "by_kind")));
+	r = dm_ok(c, "{s:s}", "cmd", "status");
+	json_array_foreach(dm_get(r, "scenes"), i, e)
+	{
+		if (json_equal(dm_get(e, "id"), sc))
+			fail_msg("status still lists the deleted scene");
+	}
+	json_decref(r);
+	json_decref(dm_err(c, "not_found", "{s:s, s:O}", "cmd", "scene.info",
+	                   "scene", sc));
+	r = dm_ok(c, "{s:s}", "cmd", "scene.list");
+	assert_int_equal(json_array_size(dm_get(r, "scenes")), 0);
+	json_decref(r);
+	json_decref(job);
+	json_decref(opt);
+	json_decref(sc);
+	json_decref(m0);
+	json_decref(m1);
+	json_decref(m2);
+	dm_pass();
+}
+
+int main(void)
+{
+	const struct CMUnitTest tests[] = {
+#define T(f) cmocka_unit_test_setup_teardown(f, dm_setup, dm_teardown)
+	        T(test_upload_reports_what_luxrad_solve_reports),
+	        T(test_query_points_equal_luxrad_solve),
+	        T(test_pipelined_requests_are_answered_in_order),
+	        T(test_query_grid_cells_spacing_and_uniformity),
+	        T(test_query_surfaces_per_node),
+	        T(test_export_is_a_valid_glb),
+	        T(test_export_colour_is_tone_mapped_lux),
+	        T(test_scene_delete_releases_its_memory),
+#undef T
+	};
+	const char *filter = getenv("LUXRAD_TEST_FILTER");
+	if (filter)
+		cmocka_set_test_filter(filter);
+	return cmocka_run_group_tests(tests, NULL, NULL);
+}
