@@ -11,7 +11,7 @@
 #   2. submits SCENE (default scenes/cornell.gltf) with `luxrad submit
 #      --solve` and watches it converge;
 #   3. queries five points (placed from the scene's bounds) and a grid on
-#      the floor (EN 12464-1 spacing), shows the daemon's status, exports
+#      a work plane above the blocks (EN 12464-1 spacing), shows the daemon's status, exports
 #      the solved mesh as GLB (build/cornell-lit.glb);
 #   4. stops the daemon with `luxrad shutdown` and waits for it to exit.
 # The daemon keeps its scenes and jobs in the data directory: a second run
@@ -93,8 +93,9 @@ with open(sys.argv[2], "w") as f:
     f.write(f"{lo[0] + 0.02 * d[0]} {c[1]} {c[2]} 1 0 0  # near -x wall\n")
     f.write(f"{hi[0] - 0.02 * d[0]} {c[1]} {c[2]} -1 0 0  # near +x wall\n")
     f.write(f"{c[0]} {c[1]} {hi[2] - 0.02 * d[2]} 0 0 -1  # near +z wall\n")
-# A grid 1 mm above the floor, inset 5 % from the walls, facing up.
-y = lo[1] + 1e-3 * d[1]
+# A work plane above the blocks (62 % of the height), inset 5 % from the
+# walls, facing up.
+y = lo[1] + 0.62 * d[1]
 x0, x1 = lo[0] + 0.05 * d[0], hi[0] - 0.05 * d[0]
 z0, z1 = lo[2] + 0.05 * d[2], hi[2] - 0.05 * d[2]
 with open(sys.argv[3], "w") as f:
@@ -103,7 +104,7 @@ EOF
 echo "== illuminance at points (lux)"
 cat "$TMP/points.txt"
 "$LUXRAD" query "$JOB" --points "$TMP/points.txt"
-echo "== floor grid (EN 12464-1 spacing; min / mean / max / U0 at the end)"
+echo "== work-plane grid (EN 12464-1 spacing): summary, then the last rows"
 # shellcheck disable=SC2046
 "$LUXRAD" query "$JOB" --grid $(cat "$TMP/grid.args") | tail -n 6
 echo "== export"

@@ -234,7 +234,9 @@ typedef struct rad_options {
 	 */
 	void (*progress)(void *ud, double fraction);
 	void *progress_ud;
-	/* Raised by another thread to stop a step early (RAD_ERR_CANCELLED). */
+	/* Raised by another thread to stop a step early (RAD_ERR_CANCELLED);
+	 * the engine reads it with an atomic load, so write it with one
+	 * (__atomic_store_n or a C11 atomic store of the same int). */
 	const volatile int *cancel;
 } rad_options;
 

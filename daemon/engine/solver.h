@@ -40,10 +40,16 @@ extern const rad_solver_ops rad_solver_progressive_ops;
 extern const rad_solver_ops rad_solver_hr_ops;
 extern const rad_solver_ops rad_solver_rmb_ops;
 
-/* 1 if the caller's cancel flag is raised. */
+/*
+ * 1 if the caller's cancel flag is raised.  The flag is written by
+ * another thread, so it is read with an atomic load (relaxed: it orders
+ * nothing, it only has to be seen); a plain volatile read is a data race
+ * in C11 terms, and ThreadSanitizer reports it.
+ */
 static inline int rad_solver_cancelled(const rad_solver *sv)
 {
-	return sv->opt.cancel && *sv->opt.cancel;
+	return sv->opt.cancel &&
+	       __atomic_load_n(sv->opt.cancel, __ATOMIC_RELAXED) != 0;
 }
 
 /* Report progress within an iteration (fraction in [0,1]). */

@@ -475,7 +475,12 @@ else
 	wait "$DPID"
 	DRC=$?
 	DPID=
-	if [[ $DRC -eq 0 ]]; then pass "luxradd exited 0"; else fail "luxradd exit status $DRC"; fi
+	if [[ $DRC -eq 0 ]]; then
+		pass "luxradd exited 0"
+	else
+		fail "luxradd exit status $DRC"
+		sed 's/^/#   luxradd: /' "$TMP/daemon.log" | tail -n 60
+	fi
 fi
 run status
 expect_exit "status after shutdown" 3 "cannot connect"
