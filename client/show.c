@@ -216,6 +216,15 @@ int lx_cmd_status(lx_ctx *cx)
 	json_array_foreach(json_object_get(reply, "job_list"), i, v)
 	        printf("job %lld (%s): %s\n", jint(v, "id"), jstr(v, "state"),
 	               bytes(v, "memory_bytes", a, sizeof a));
+	v = json_object_get(reply, "modbus");
+	if (json_is_object(v)) {
+		if (json_is_integer(json_object_get(v, "port")))
+			printf("modbus: %s on port %lld, %lld client(s)\n",
+			       jstr(v, "state"), jint(v, "port"),
+			       jint(v, "clients"));
+		else
+			printf("modbus: %s\n", jstr(v, "state"));
+	}
 	json_decref(reply);
 	return LX_EXIT_OK;
 }

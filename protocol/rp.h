@@ -124,7 +124,9 @@ typedef struct rp_error {
 	X(QUERY_POINTS, "query.points", 0, "lux at points")                    \
 	X(QUERY_GRID, "query.grid", 0, "lux on a calculation grid")            \
 	X(QUERY_SURFACES, "query.surfaces", 0, "lux per surface (node)")       \
-	X(EXPORT, "export", 0, "the solved mesh as GLB (payload)")
+	X(EXPORT, "export", 0, "the solved mesh as GLB (payload)")             \
+	X(SENSOR_ADD, "sensor.add", 0, "a named illuminance sensor on a job")  \
+	X(SENSOR_LIST, "sensor.list", 0, "a job's sensors and latest lux")
 
 typedef enum rp_cmd {
 #define RP_CMD_ENUM_(name, str, payload, help) RP_CMD_##name,

@@ -46,6 +46,8 @@ static const srv_cmd_fn cmd_table[RP_CMD_COUNT] = {
         [RP_CMD_QUERY_GRID] = srv_cmd_query_grid,
         [RP_CMD_QUERY_SURFACES] = srv_cmd_query_surfaces,
         [RP_CMD_EXPORT] = srv_cmd_export,
+        [RP_CMD_SENSOR_ADD] = srv_cmd_sensor_add,
+        [RP_CMD_SENSOR_LIST] = srv_cmd_sensor_list,
 };
 
 cmd_result srv_req_fail(srv_req *r, rp_err code, const char *fmt, ...)
@@ -391,6 +393,7 @@ static cmd_result cmd_status(srv_req *r)
 	json_object_set_new(r->res, "commands", commands_json(s));
 	json_object_set_new(r->res, "events_dropped",
 	                    json_integer((json_int_t)s->events_dropped));
+	json_object_set_new(r->res, "modbus", srv_mb_status_json(s));
 	return CMD_REPLY;
 }
 

@@ -14,6 +14,8 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "modbus.h"
+
 typedef enum srv_log_level {
 	SRV_LOG_ERROR = 0,
 	SRV_LOG_WARN,
@@ -55,7 +57,7 @@ typedef struct srv_config {
 	size_t max_output_bytes;      /* per-connection send buffer before the
 	                                 drop policy applies; default 8 MiB */
 	double checkpoint_interval_s; /* default 30 */
-	/* Modbus (issue 5) keys are parsed here too once they exist. */
+	mb_config modbus;    /* the modbus_* keys (modbus.h, MODBUS.md) */
 	int listen_unix_set; /* listen_unix fixed (given in the file or a
 	                        flag, or systemd's RUNTIME_DIRECTORY); until
 	                        then it follows data_dir */

@@ -38,7 +38,7 @@
 
 #define READ_CHUNK (64 * 1024)
 #define READ_BUDGET (4u << 20) /* per connection per loop turn */
-#define CLOSE_FLUSH_S 5.0      /* time a closing connection may flush */
+#define CLOSE_FLUSH_S 15.0     /* time a closing connection may flush */
 #define EOF_GRACE_S 60.0       /* half-closed peer awaiting a reply */
 
 srv_conn *srv_conn_find(srv *s, uint64_t id)
@@ -241,6 +241,23 @@ int srv_conn_send_json(srv *s, srv_conn *c, json_t *hdr)
 		return -1;
 	}
 	return srv_conn_send(s, c, buf, len);
+}
+
+void srv_conn_drop_queued(srv_conn *c)
+{
+	srv_chunk **pp = &c->out_head;
+	if (*pp && (*pp)->off > 0) /* partly sent: must be finished */
+		pp = &(*pp)->next;
+	while (*pp) {
+		srv_chunk *k = *pp;
+		*pp = k->next;
+		c->out_bytes -= k->len - k->off;
+		free(k->buf);
+		free(k);
+	}
+	c->out_tail = NULL;
+	for (srv_chunk *k = c->out_head; k; k = k->next)
+		c->out_tail = k;
 }
 
 void srv_conn_close_after_flush(srv *s, srv_conn *c)

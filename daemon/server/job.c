@@ -46,7 +46,7 @@ typedef enum job_action {
 	ACT_TARGET,   /* target reached: pause */
 	ACT_DONE,     /* converged or max_iterations */
 	ACT_SHUTDOWN, /* back to queued */
-	ACT_FAIL,     /* an eps change failed (err filled) */
+	ACT_FAIL,     /* the engine failed (err filled) */
 } job_action;
 
 /* ------------------------------------------------------------ lifecycle */
@@ -289,6 +289,8 @@ static void post_state(srv *s, srv_job *j)
 /* Apply due eps changes (caller holds mu). */
 static int apply_eps_locked(srv_job *j, rad_error *err)
 {
+	if (!j->solver)
+		return 0; /* applied once the solver exists */
 	while (j->eps_applied < j->neps &&
 	       j->eps_log[j->eps_applied].iteration <= j->solver_iter) {
 		if (rad_solver_set_eps(j->solver,
@@ -479,36 +481,52 @@ static srv_job_state action_state(job_action a)
 	}
 }
 
+/* Start the solver's deadline for a time budget (caller holds mu). */
+static void arm_budget_locked(srv_job *j)
+{
+	j->deadline = j->target.mode == JOB_MODE_SECONDS
+	                      ? rad_seconds() + j->target.left_s
+	                      : 0;
+}
+
+/*
+ * Build the solver (the matrix solver computes its form factors here, a
+ * long phase that the cancel flag may interrupt).  Returns ACT_STEP with
+ * a solver, or the action that interrupted it, or ACT_FAIL.
+ */
+static job_action ensure_solver(srv *s, srv_job *j, rad_error *err)
+{
+	while (!j->solver) {
+		if (build_solver(j, err) == 0)
+			break;
+		if (err->code != RAD_ERR_CANCELLED)
+			return ACT_FAIL;
+		job_action a = next_action(s, j, err);
+		if (a != ACT_STEP)
+			return a;
+	}
+	return ACT_STEP;
+}
+
 static void run_job(srv *s, srv_job *j)
 {
 	rad_error err = {0};
-	job_action a = ACT_STEP;
+	job_action a;
 
 	j->last_ckpt = rad_seconds();
-	if (!j->solver && build_solver(j, &err) != 0) {
-		finish(s, j, SRV_JOB_FAILED, err.msg);
-		return;
-	}
-	if (j->solver_iter < j->iteration) {
-		if (replay(s, j, &a, &err) != 0) {
-			finish(s, j, SRV_JOB_FAILED, err.msg);
-			return;
-		}
-		if (a != ACT_STEP) {
-			finish(s, j, action_state(a), NULL);
-			return;
-		}
-	}
 	pthread_mutex_lock(&j->mu);
-	if (j->target.mode == JOB_MODE_SECONDS)
-		j->deadline = rad_seconds() + j->target.left_s;
+	arm_budget_locked(j);
 	pthread_mutex_unlock(&j->mu);
-	for (;;) {
+	a = ensure_solver(s, j, &err);
+	if (a == ACT_STEP && j->solver_iter < j->iteration) {
+		if (replay(s, j, &a, &err) != 0)
+			a = ACT_FAIL;
+		pthread_mutex_lock(&j->mu);
+		arm_budget_locked(j); /* the replay is not the job's time */
+		pthread_mutex_unlock(&j->mu);
+	}
+	while (a == ACT_STEP) {
 		a = next_action(s, j, &err);
-		if (a == ACT_FAIL) {
-			finish(s, j, SRV_JOB_FAILED, err.msg);
-			return;
-		}
 		if (a != ACT_STEP)
 			break;
 		j->step_t0 = rad_seconds();
@@ -516,15 +534,18 @@ static void run_job(srv *s, srv_job *j)
 		if (st == RAD_ERR_CANCELLED)
 			continue; /* next_action tells why */
 		if (st != RAD_OK) {
-			finish(s, j, SRV_JOB_FAILED, err.msg);
-			return;
+			a = ACT_FAIL;
+			break;
 		}
 		publish(s, j, 1);
 		double iv = (double)atomic_load(&s->ckpt_interval_ms) / 1000.0;
 		if (rad_seconds() - j->last_ckpt >= iv)
 			checkpoint(s, j);
 	}
-	finish(s, j, action_state(a), NULL);
+	if (a == ACT_FAIL)
+		finish(s, j, SRV_JOB_FAILED, err.msg);
+	else
+		finish(s, j, action_state(a), NULL);
 }
 
 /* ---------------------------------------------------------------- workers */

@@ -58,6 +58,7 @@ static void create_done(srv *s, srv_task *t)
 			snprintf(j->name, sizeof(j->name), "job-%llu",
 			         (unsigned long long)j->id);
 		srv_job_register(s, j);
+		srv_mb_job_added(s, j);
 		srv_info("job %llu '%s' created: scene %llu, solver %s, "
 		         "%d threads",
 		         (unsigned long long)j->id, j->name,

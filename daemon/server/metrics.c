@@ -114,6 +114,10 @@ static void metrics_body(srv *s, sbuf *sb)
 		sb_printf(sb, "luxradd_commands_total{cmd=\"%s\"} %llu\n",
 		          rp_cmd_name((rp_cmd)k),
 		          (unsigned long long)s->cmd_calls[k]);
+	char *mbt = srv_mb_metrics_text(s);
+	if (mbt)
+		sb_printf(sb, "%s", mbt);
+	free(mbt);
 	static const char *const names[4][2] = {
 	        {"luxradd_job_iteration", "Iterations done."},
 	        {"luxradd_job_residual", "Residual of the last iteration."},

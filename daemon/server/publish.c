@@ -70,11 +70,13 @@ static void deliver(srv *s, srv_conn *c, srv_sub *sub, ev_kind ev,
 			return;
 		}
 		s->slow_consumers++;
+		size_t queued = c->out_bytes;
+		srv_conn_drop_queued(c); /* closing: the error goes next */
 		srv_conn_send_error(s, c, NULL, RP_ERR_SLOW_CONSUMER,
 		                    "events for job %llu do not fit in the "
 		                    "output queue (%zu bytes queued, limit "
 		                    "%zu): read faster",
-		                    (unsigned long long)sub->job, c->out_bytes,
+		                    (unsigned long long)sub->job, queued,
 		                    s->cfg.max_output_bytes);
 		return;
 	}
@@ -113,6 +115,7 @@ void srv_publish_event(srv *s, srv_msg *m)
 	srv_job *j = srv_job_find(s, m->job);
 	if (!j)
 		return; /* deleted meanwhile */
+	srv_mb_job_event(s, j, m->ev);
 	if (m->ev == EV_STATE) {
 		if (m->seq > j->pub_seq) {
 			j->pub_seq = m->seq;
@@ -130,6 +133,7 @@ void srv_publish_state_now(srv *s, srv_job *j)
 	unsigned char *data;
 	size_t len;
 
+	srv_mb_job_event(s, j, EV_STATE);
 	pthread_mutex_lock(&j->mu);
 	uint64_t seq = j->state_seq;
 	json_t *ev = seq > j->pub_seq ? srv_state_event_locked(j) : NULL;
@@ -184,6 +188,7 @@ void srv_job_complete_waiters(srv *s, srv_job *j)
 
 void srv_publish_job_gone(srv *s, srv_job *j)
 {
+	srv_mb_job_gone(s, j);
 	for (srv_conn *c = s->conns; c; c = c->next) {
 		srv_sub *sub = find_sub(c, j->id);
 		if (sub) {

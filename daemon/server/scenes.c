@@ -32,6 +32,7 @@ void srv_scene_unref(srv_scene *sc)
 	if (!sc || atomic_fetch_sub(&sc->refs, 1) != 1)
 		return;
 	rad_scene_free(sc->scene);
+	rad_gltf_sensors_free(sc->sensors);
 	free(sc);
 }
 
@@ -53,6 +54,14 @@ srv_scene *srv_scene_load(uint64_t id, const char *name, double created,
 		return NULL;
 	}
 	if (rad_gltf_load(bytes, len, &sc->scene, &sc->info, err) != RAD_OK) {
+		free(sc);
+		return NULL;
+	}
+	/* Sensor nodes (Modbus): read from the same bytes at every load, so
+	 * a restart finds them again; a bad declaration refuses the scene. */
+	if (rad_gltf_sensors(bytes, len, &sc->sensors, &sc->nsensors, err) !=
+	    RAD_OK) {
+		rad_scene_free(sc->scene);
 		free(sc);
 		return NULL;
 	}

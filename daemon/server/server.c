@@ -332,6 +332,9 @@ static int write_addr_file(srv *s, char *msg, size_t msglen)
 	}
 	for (int i = 0; i < s->nlis; i++)
 		fprintf(f, "%s\n", s->lis[i].text);
+	char mbtext[400];
+	if (srv_mb_addr_text(s, mbtext, sizeof(mbtext)))
+		fprintf(f, "%s\n", mbtext);
 	int bad = fflush(f) != 0 || fsync(fileno(f)) != 0;
 	bad |= fclose(f) != 0;
 	if (bad || rename(tmp, s->addr_path) != 0) {
@@ -375,7 +378,7 @@ int srv_listen(srv *s, char *msg, size_t msglen)
 			         "loopback and has no authentication",
 			         s->lis[i].text + 8);
 	}
-	return 0;
+	return srv_mb_start(s, msg, msglen);
 }
 
 /* Log the listeners and publish them in luxradd.addr. */
@@ -668,6 +671,7 @@ int srv_run(srv *s)
 		srv_conn_tick(s, now);
 		srv_metrics_tick(s, now);
 		budget_tick(s, now);
+		srv_mb_tick(s, now);
 		if (s->shutting_down)
 			shutdown_progress(s, now);
 		srv_conn_reap(s);
@@ -689,6 +693,7 @@ void srv_destroy(srv *s)
 	srv_pool_stop(&s->query_pool);
 	srv_pool_stop(&s->store_pool);
 	srv_inbox_drain(s);
+	srv_mb_stop(s); /* workers joined, sensor tasks delivered */
 	srv_conn_free_all(s);
 	srv_metrics_free_all(s);
 	while (s->jobs) {

@@ -54,17 +54,19 @@ typedef struct srv_task srv_task;
  */
 struct srv_scene {
 	atomic_int refs;
-	uint64_t id;             /* the store's id */
-	char name[256];          /* immutable */
-	uint64_t bytes;          /* size uploaded */
-	double created;          /* Unix time */
-	rad_scene *scene;        /* committed: read-only, any thread */
-	rad_scene_counts counts; /* immutable, read at load */
-	rad_gltf_info info;      /* immutable */
-	double lo[3], hi[3];     /* bounds, immutable */
-	rad_mem_report mem;      /* engine memory, read once after commit */
-	int njobs;               /* jobs using it (I/O thread) */
-	srv_scene *next;         /* registry list (I/O thread) */
+	uint64_t id;              /* the store's id */
+	char name[256];           /* immutable */
+	uint64_t bytes;           /* size uploaded */
+	double created;           /* Unix time */
+	rad_scene *scene;         /* committed: read-only, any thread */
+	rad_scene_counts counts;  /* immutable, read at load */
+	rad_gltf_info info;       /* immutable */
+	double lo[3], hi[3];      /* bounds, immutable */
+	rad_mem_report mem;       /* engine memory, read once after commit */
+	rad_gltf_sensor *sensors; /* declared in the glTF (immutable) */
+	size_t nsensors;
+	int njobs;       /* jobs using it (I/O thread) */
+	srv_scene *next; /* registry list (I/O thread) */
 };
 
 void srv_scene_ref(srv_scene *sc);
@@ -373,6 +375,8 @@ int srv_conn_send_json(srv *s, srv_conn *c, json_t *hdr);
 void srv_conn_send_error(srv *s, srv_conn *c, json_t *id, rp_err code,
                          const char *fmt, ...)
         __attribute__((format(printf, 5, 6)));
+/* Forget queued output not yet started (the connection is closing). */
+void srv_conn_drop_queued(srv_conn *c);
 /* Stop reading; flush what is queued (bounded time); then close. */
 void srv_conn_close_after_flush(srv *s, srv_conn *c);
 /* A deferred reply was delivered: process buffered frames. */
@@ -488,6 +492,32 @@ void srv_summarize(srv *s, srv_summary *sum);
 /* recover.c */
 int srv_recover(srv *s, char *msg, size_t msglen);
 
+/* mbpub.c: the daemon's side of the Modbus server (modbus.h).  All on
+ * the I/O thread unless said otherwise. */
+struct srv_mbpub;
+/* Start the server (modbus_listen none: nothing started); -2 with msg
+ * when it cannot (bad address, port in use). */
+int srv_mb_start(srv *s, char *msg, size_t msglen);
+/* After the worker threads are joined. */
+void srv_mb_stop(srv *s);
+/* "modbus HOST:PORT" for luxradd.addr; 0 when the server is off. */
+int srv_mb_addr_text(srv *s, char *buf, size_t len);
+/* Daemon block (memory, uptime): at most once a second. */
+void srv_mb_tick(srv *s, double now);
+/* A job exists (created or restored): its values, its sensors declared. */
+void srv_mb_job_added(srv *s, srv_job *j);
+/* After srv_recover: every restored job, in id order. */
+void srv_mb_recovered(srv *s);
+/* A job event reached the I/O thread (or the I/O thread changed the
+ * state): republish the job; after an iteration, evaluate its sensors
+ * on the new solution (query pool). */
+void srv_mb_job_event(srv *s, srv_job *j, ev_kind ev);
+void srv_mb_job_gone(srv *s, srv_job *j);
+json_t *srv_mb_status_json(srv *s);
+char *srv_mb_metrics_text(srv *s); /* Prometheus lines, malloc'ed */
+cmd_result srv_cmd_sensor_add(srv_req *r);
+cmd_result srv_cmd_sensor_list(srv_req *r);
+
 /* -------------------------------------------------------------- the daemon */
 
 #define SRV_MAX_LISTENERS 3
@@ -553,6 +583,9 @@ struct srv {
 	atomic_int stopping;           /* workers: checkpoint and stop */
 	atomic_llong sol_bytes;        /* live published solutions */
 	atomic_llong ckpt_interval_ms; /* checkpoint_interval_s */
+
+	struct mb_server *mb;    /* Modbus server (NULL when off) */
+	struct srv_mbpub *mbpub; /* mbpub.c's state (I/O thread) */
 };
 
 /* server.c */

@@ -23,6 +23,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "harness.h"
 
@@ -53,7 +54,7 @@ static void usage(FILE *f)
 	        "[1]\n"
 	        "  --eps X            refinement threshold [engine default]\n"
 	        "  --points N         points per query for (b) [10000]\n"
-	        "  --queries N        queries for (b) [20]\n"
+	        "  --queries N        queries for (b) [10]\n"
 	        "  --subscribers N    subscribers for (c) [50]\n"
 	        "  --json             one JSON object on stdout\n"
 	        "Times in seconds; no pass/fail on speed.\n");
@@ -188,18 +189,25 @@ static double daemon_solve(dm_conn *c, const json_t *scene, const bench_args *a,
 	return (t1 - t0) / 1e3;
 }
 
-/* luxrad-solve on the same scene and options: its solve seconds, and the
- * process wall time in *wall_s. */
-static double cli_solve(const char *scene, const bench_args *a, double *wall_s,
-                        long long *iterations)
+/*
+ * luxrad-solve on the same scene and options: its solve seconds, and the
+ * process wall time in *wall_s.  With a points file, *query_s gets the
+ * time left for the queries: wall - load - solve (process start-up and
+ * output included, a few ms).
+ */
+static double cli_solve(const char *scene, const bench_args *a,
+                        const char *points, double *wall_s,
+                        long long *iterations, double *query_s)
 {
-	char cmd[2048], eps[64] = "";
+	char cmd[2048], eps[64] = "", pts[600] = "";
 	if (a->eps > 0)
 		snprintf(eps, sizeof(eps), "--eps %.17g", a->eps);
+	if (points)
+		snprintf(pts, sizeof(pts), "--points '%s'", points);
 	snprintf(cmd, sizeof(cmd),
 	         "'%s/luxrad-solve' '%s' --json --threads %d --converge 1e-3 "
-	         "--max-iterations 100 %s 2>/dev/null",
-	         LUXRAD_BINARY_DIR, scene, a->threads, eps);
+	         "--max-iterations 100 %s %s 2>/dev/null",
+	         LUXRAD_BINARY_DIR, scene, a->threads, eps, pts);
 	char *out = NULL;
 	double t0 = dm_now_ms();
 	int rc = dm_run(cmd, &out);
@@ -213,6 +221,8 @@ static double cli_solve(const char *scene, const bench_args *a, double *wall_s,
 		dm_fail("luxrad-solve --json: %s", je.text);
 	double s = dm_num(j, "seconds");
 	*iterations = dm_int(j, "iterations");
+	if (query_s)
+		*query_s = *wall_s - dm_num(j, "load_seconds") - s;
 	json_decref(j);
 	return s;
 }
@@ -222,7 +232,7 @@ static int parse_args(int argc, char **argv, bench_args *a)
 	*a = (bench_args){.runs = 5,
 	                  .threads = 1,
 	                  .points = 10000,
-	                  .queries = 20,
+	                  .queries = 10,
 	                  .subscribers = 50};
 	for (int i = 1; i < argc; i++) {
 		const char *o = argv[i];
@@ -267,9 +277,12 @@ static int parse_args(int argc, char **argv, bench_args *a)
 	return 0;
 }
 
-/* (b): Q queries of n points on the floor of the scene's bounds. */
-static void bench_queries(dm_conn *c, const json_t *scene, const bench_args *a,
-                          double *p50, double *p99, long long *iters)
+/* (b): Q queries of n points on the floor of the scene's bounds; and
+ * luxrad-solve answering the same points once (*cli_s). */
+static void bench_queries(dm_conn *c, const json_t *scene,
+                          const char *scene_path, const bench_args *a,
+                          double *p50, double *p99, long long *iters,
+                          double *cli_s)
 {
 	json_t *opt = job_options(a);
 	json_t *job = dm_job_create(c, scene, "hr", opt);
@@ -290,6 +303,8 @@ static void bench_queries(dm_conn *c, const json_t *scene, const bench_args *a,
 	json_decref(info);
 	/* A fixed pseudo-random set: points 1 cm above the floor, up. */
 	json_t *pts = json_array();
+	char *text = malloc((size_t)a->points * 128 + 1);
+	size_t tl = 0;
 	uint64_t s = 0x9E3779B97F4A7C15ull;
 	for (int i = 0; i < a->points; i++) {
 		double r[2];
@@ -299,12 +314,20 @@ static void bench_queries(dm_conn *c, const json_t *scene, const bench_args *a,
 			s ^= s << 17;
 			r[k] = (double)(s >> 11) / 9007199254740992.0;
 		}
+		double x = lo[0] + r[0] * (hi[0] - lo[0]), y = lo[1] + 0.01,
+		       z = lo[2] + r[1] * (hi[2] - lo[2]);
 		json_array_append_new(
-		        pts,
-		        json_pack("[f,f,f,i,i,i]",
-		                  lo[0] + r[0] * (hi[0] - lo[0]), lo[1] + 0.01,
-		                  lo[2] + r[1] * (hi[2] - lo[2]), 0, 1, 0));
+		        pts, json_pack("[f,f,f,i,i,i]", x, y, z, 0, 1, 0));
+		tl += (size_t)sprintf(text + tl, "%.17g %.17g %.17g 0 1 0\n", x,
+		                      y, z);
 	}
+	char *pf = dm_tmp_file(".pts", text, tl);
+	free(text);
+	double wall;
+	long long it;
+	cli_solve(scene_path, a, pf, &wall, &it, cli_s);
+	unlink(pf);
+	free(pf);
 	double *ms = malloc((size_t)a->queries * sizeof(double));
 	for (int q = 0; q < a->queries; q++) {
 		double t0 = dm_now_ms();
@@ -330,6 +353,7 @@ int main(int argc, char **argv)
 	if (parse_args(argc, argv, &a) != 0)
 		return 2;
 	dm_fail_hook = bench_fail;
+	dm_reply_ms = 3600 * 1000; /* 10,000 points take seconds each */
 	signal(SIGPIPE, SIG_IGN);
 	char gen[512];
 	const char *scene = a.scene ? a.scene
@@ -362,10 +386,10 @@ int main(int argc, char **argv)
 	/* A warm-up of each (page cache, first BVH build). */
 	double tmp;
 	daemon_solve(c, sc, &a, NULL, 0, &tmp, &ev, &dit);
-	cli_solve(scene, &a, &tmp, &cit);
+	cli_solve(scene, &a, NULL, &tmp, &cit, NULL);
 	for (int i = 0; i < n; i++) {
 		dw[i] = daemon_solve(c, sc, &a, NULL, 0, &de[i], &ev, &dit);
-		cs[i] = cli_solve(scene, &a, &cw[i], &cit);
+		cs[i] = cli_solve(scene, &a, NULL, &cw[i], &cit, NULL);
 		fprintf(stderr,
 		        "(a) run %d: daemon %.3f s (engine %.3f s), "
 		        "luxrad-solve %.3f s (process %.3f s)\n",
@@ -375,9 +399,9 @@ int main(int argc, char **argv)
 	       m_cw = median(cw, n);
 
 	/* (b) query latency. */
-	double p50 = 0, p99 = 0;
+	double p50 = 0, p99 = 0, cli_q = 0;
 	long long qit = 0;
-	bench_queries(c, sc, &a, &p50, &p99, &qit);
+	bench_queries(c, sc, scene, &a, &p50, &p99, &qit, &cli_q);
 
 	/* (c) 50 subscribers vs none, interleaved. */
 	dm_conn **subs = calloc((size_t)a.subscribers + 1, sizeof(*subs));
@@ -401,17 +425,18 @@ int main(int argc, char **argv)
 		json_t *o = json_pack(
 		        "{s:s, s:i, s:i, s:{s:f, s:f, s:f, s:f, s:f, s:I, "
 		        "s:I}, "
-		        "s:{s:i, s:i, s:f, s:f, s:I}, s:{s:i, s:f, s:f, s:f, "
+		        "s:{s:i, s:i, s:f, s:f, s:f, s:I}, s:{s:i, s:f, s:f, "
+		        "s:f, "
 		        "s:I}}",
 		        "scene", scene, "runs", n, "threads", a.threads,
 		        "solve", "daemon_s", m_dw, "daemon_engine_s", m_de,
 		        "cli_solve_s", m_cs, "cli_process_s", m_cw, "ratio",
 		        m_dw / m_cs, "daemon_iterations", dit, "cli_iterations",
 		        cit, "query", "points", a.points, "queries", a.queries,
-		        "p50_ms", p50, "p99_ms", p99, "iterations", qit,
-		        "fanout", "subscribers", a.subscribers, "none_s", m_w0,
-		        "with_s", m_w1, "ratio", m_w1 / m_w0, "events_read",
-		        sub_events);
+		        "p50_ms", p50, "p99_ms", p99, "cli_query_ms",
+		        cli_q * 1e3, "iterations", qit, "fanout", "subscribers",
+		        a.subscribers, "none_s", m_w0, "with_s", m_w1, "ratio",
+		        m_w1 / m_w0, "events_read", sub_events);
 		json_dumpf(o, stdout, JSON_INDENT(2));
 		fputc('\n', stdout);
 		json_decref(o);
@@ -426,8 +451,10 @@ int main(int argc, char **argv)
 		       "1.05); vs process wall %.3f\n",
 		       m_dw / m_cs, m_dw / m_cw);
 		printf("(b) query.points, %d points, %d queries: p50 %.2f ms, "
-		       "p99 %.2f ms (%.0f points/s at p50)\n",
-		       a.points, a.queries, p50, p99, a.points / (p50 / 1e3));
+		       "p99 %.2f ms (%.0f points/s at p50); luxrad-solve "
+		       "--points, same points: %.2f ms\n",
+		       a.points, a.queries, p50, p99, a.points / (p50 / 1e3),
+		       cli_q * 1e3);
 		printf("(c) solve with %d subscribers %.3f s vs none %.3f s: "
 		       "ratio %.3f (%lld events read)\n",
 		       a.subscribers, m_w1, m_w0, m_w1 / m_w0, sub_events);

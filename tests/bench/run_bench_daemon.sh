@@ -48,6 +48,8 @@ print("| (b) query.points %d points, p50 | %.2f ms |"
       % (q["points"], q["p50_ms"]))
 print("| (b) query.points %d points, p99 | %.2f ms |"
       % (q["points"], q["p99_ms"]))
+print("| (b) luxrad-solve --points, same points (once) | %.2f ms |"
+      % q["cli_query_ms"])
 print("| (c) solve, %d subscribers / none | %.3f / %.3f = %.3f |"
       % (f["subscribers"], f["with_s"], f["none_s"], f["ratio"]))
 PY

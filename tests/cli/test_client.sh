@@ -210,7 +210,8 @@ fi
 D="$TMP/d"
 mkdir -p "$D"
 "$LUXRADD" --data-dir "$D" --listen-tcp 127.0.0.1:0 \
-	--listen-unix "$D/s.sock" --metrics-listen none >"$TMP/daemon.log" 2>&1 &
+	--listen-unix "$D/s.sock" --metrics-listen none \
+	--modbus-listen 127.0.0.1:0 >"$TMP/daemon.log" 2>&1 &
 DPID=$!
 ADDR=
 for _ in $(seq 1 200); do
@@ -233,6 +234,7 @@ export LUXRAD_CONNECT=$ADDR
 run status
 expect_exit "status" 0
 expect_out "status shows jobs by state" "jobs:"
+expect_out "status shows the Modbus server" "modbus: listening on port "
 run status --json
 check_py "status --json: one object, jobs by state" '
 import json, sys

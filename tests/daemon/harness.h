@@ -14,6 +14,10 @@
  * reply with its id and queues any events that arrive meanwhile, for
  * dm_event to return later in arrival order.
  *
+ * Files: harness.c (the child process, fixtures, failures, registry),
+ * harness_conn.c (connections, frames, requests, HTTP), harness_util.c
+ * (scene/job/query helpers, files, numbers).
+ *
  * DESIGN
  * Tests are single-threaded; concurrency is made by interleaving
  * requests on several connections.  Every daemon and connection is
@@ -74,6 +78,9 @@ void dm_fail(const char *fmt, ...) __attribute__((format(printf, 1, 2)))
 __attribute__((noreturn));
 /* Failure hook: the default calls cmocka's fail_msg. */
 extern void (*dm_fail_hook)(const char *msg);
+/* Reply (and send) deadline of the helpers, ms; DM_REPLY_MS unless a
+ * program changes it (the benchmark's big queries). */
+extern int dm_reply_ms;
 /* Print a daemon's log to stderr (last max_bytes bytes). */
 void dm_print_log(const dm_daemon *d, size_t max_bytes);
 
@@ -120,6 +127,9 @@ dm_conn *dm_connect_tcp_rcvbuf(const dm_daemon *d, int rcvbuf);
 /* Connect and say hello (token may be NULL); fails unless ok. */
 dm_conn *dm_open(const dm_daemon *d, const char *token);
 void dm_close(dm_conn *c);
+/* The registry dm_teardown closes from (harness internals). */
+void dm_conn_register(dm_conn *c);
+void dm_conn_forget(dm_conn *c);
 
 /* Send raw bytes (all of them, deadline c->send_ms); returns 0, -1 if
  * the peer closed (EPIPE / ECONNRESET), -2 if it stopped reading. */
@@ -154,6 +164,14 @@ json_t *dm_call_payload(dm_conn *c, const void *payload, size_t len,
 json_t *dm_ok(dm_conn *c, const char *fmt, ...);
 /* dm_call and require an error with this code; returns the reply. */
 json_t *dm_err(dm_conn *c, const char *code, const char *fmt, ...);
+/* Send a header (stolen) with a fresh id, return its reply (new
+ * reference); must: fail on timeout / close, else NULL then. */
+json_t *dm_call_json(dm_conn *c, json_t *h, const void *payload, size_t len,
+                     int timeout_ms, int must);
+/* Compact JSON, cut at ~1500 characters (malloc'ed, for messages). */
+char *dm_dumps(const json_t *j);
+/* Fail (printing the reply) unless it is "ok": true. */
+void dm_require_ok(const json_t *r, const char *what);
 /* The error code of a reply ("" when ok, "?" when malformed). */
 const char *dm_err_code(const json_t *reply);
 /* Frames with no id and "ok": false received so far (e.g. slow_consumer,
@@ -186,6 +204,9 @@ json_t *dm_wait_job(dm_conn *c, const json_t *job, const char *states,
  * returns the iteration the answer came from. */
 long long dm_query_points(dm_conn *c, const json_t *job, const double *pts,
                           size_t n, double *lux);
+/* Upload a sample scene, solve it (hr, threads 1, converge) and return
+ * the job id; *scene gets the scene id (new references). */
+json_t *dm_solve_sample(dm_conn *c, const char *sample, json_t **scene);
 /* HTTP GET on the metrics listener: returns the status code, body
  * malloc'ed into *body (headers into *headers if not NULL). */
 int dm_http_get(const dm_daemon *d, const char *path, char **headers,
@@ -198,6 +219,9 @@ const char *dm_sample(const char *name, char *buf, size_t len);
  * kind plus extra args ("--triangles 20000"); returns the path. */
 const char *dm_gen_scene(const char *file, const char *args, char *buf,
                          size_t len);
+/* A new temporary file holding data; returns its path (malloc'ed; the
+ * caller unlinks and frees it). */
+char *dm_tmp_file(const char *suffix, const void *data, size_t len);
 /* Whole file (malloc'ed, caller frees); fails when unreadable. */
 unsigned char *dm_read_file(const char *path, size_t *len);
 /* Run a shell command, capture stdout (malloc'ed); returns exit status

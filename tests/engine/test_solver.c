@@ -15,16 +15,23 @@
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdint.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include <cmocka.h>
+#include <unistd.h>
+
+#include "gltf.h"
 
 #include "rad.h"
 
-/* Axis-aligned box [0,w]x[0,h]x[0,d], faces towards the inside. */
-static rad_scene *make_box(double w, double h, double d, double rho, double lum,
-                           const rad_light_desc *light)
+/* Axis-aligned box [0,w]x[0,h]x[0,d], faces towards the inside, with
+ * nlights lights and, when extra is given, more triangles (9 doubles
+ * each) of the box's material before the commit. */
+static rad_scene *make_box_ext(double w, double h, double d, double rho,
+                               double lum, const rad_light_desc *lights,
+                               int nlights, const double *extra, size_t nextra)
 {
 	rad_scene *s = NULL;
 	rad_error err;
@@ -50,10 +57,21 @@ static rad_scene *make_box(double w, double h, double d, double rho, double lum,
 		        rad_scene_add_triangles(s, mat, node, t, 2, &err),
 		        RAD_OK);
 	}
-	if (light)
-		assert_int_equal(rad_scene_add_light(s, light, &err), RAD_OK);
+	for (int i = 0; i < nlights; i++)
+		assert_int_equal(rad_scene_add_light(s, &lights[i], &err),
+		                 RAD_OK);
+	if (nextra)
+		assert_int_equal(rad_scene_add_triangles(s, mat, node, extra,
+		                                         nextra, &err),
+		                 RAD_OK);
 	assert_int_equal(rad_scene_commit(s, &err), RAD_OK);
 	return s;
+}
+
+static rad_scene *make_box(double w, double h, double d, double rho, double lum,
+                           const rad_light_desc *light)
+{
+	return make_box_ext(w, h, d, rho, lum, light, light ? 1 : 0, NULL, 0);
 }
 
 static rad_solver *solve_opt(rad_scene *s, const rad_options *o, double tol)
@@ -218,6 +236,129 @@ static void test_rmb_box_099(void **state)
 	check_rmb_box(0.99, 1e-3, 0.05, 0.25, 0.06);
 }
 
+/*
+ * Zero-area and sliver triangles: the zero-area ones are skipped and
+ * counted, slivers (a 1e-7 m wide needle, a 1e-6 m2 shard) are kept, and
+ * every solver still gives finite, non-negative results.
+ */
+static void test_slivers_stay_finite(void **state)
+{
+	(void)state;
+	const double extra[4 * 9] = {
+	        /* zero area: collinear, and a repeated vertex */
+	        0.1, 0.1, 0.1, 0.2, 0.2, 0.2, 0.3, 0.3, 0.3, 0.5, 0.2, 0.5, 0.5,
+	        0.2, 0.5, 0.6, 0.2, 0.5,
+	        /* a needle 0.6 m long, 1e-7 m wide, facing up */
+	        0.2, 0.3, 0.4, 0.2, 0.3, 0.4000001, 0.8, 0.3, 0.4,
+	        /* a 1e-6 m2 shard */
+	        0.5, 0.25, 0.5, 0.5, 0.25, 0.501, 0.502, 0.25, 0.5};
+	rad_light_desc L;
+	memset(&L, 0, sizeof(L));
+	L.kind = RAD_LIGHT_POINT;
+	L.position[0] = 0.5, L.position[1] = 0.7, L.position[2] = 0.5;
+	L.intensity[0] = L.intensity[1] = L.intensity[2] = 100;
+	rad_scene *s = make_box_ext(1, 0.8, 1, 0.6, 0, &L, 1, extra, 4);
+	rad_scene_counts n;
+	rad_scene_counts_get(s, &n);
+	print_message("slivers: %u triangles in, %u degenerate skipped, %u "
+	              "polygons\n",
+	              n.triangles_in, n.triangles_degenerate, n.polygons);
+	assert_true(n.triangles_degenerate >= 2);
+	const rad_solver_kind kinds[3] = {RAD_SOLVER_HR, RAD_SOLVER_RMB,
+	                                  RAD_SOLVER_PROGRESSIVE};
+	for (int k = 0; k < 3; k++) {
+		rad_options o;
+		rad_options_default(&o);
+		o.solver = kinds[k];
+		o.threads = 2;
+		o.eps = 1e-3;
+		o.mesh_edge_rel = 0.15;
+		rad_solver *sv = solve_opt(s, &o, 1e-3);
+		leaf_acc a = leaves_of(sv);
+		assert_true(isfinite(a.min_b) && isfinite(a.max_b));
+		assert_true(a.min_b >= 0 && a.min_e >= 0 && isfinite(a.max_e));
+		const double pts[2][6] = {{0.5, 0.0, 0.5, 0, 1, 0},
+		                          {0.5, 0.3, 0.45, 0, 1, 0}};
+		double lux[2];
+		rad_error err;
+		assert_int_equal(
+		        rad_solver_illuminance(sv, &pts[0][0], 2, lux, &err),
+		        RAD_OK);
+		print_message("  %s: floor %.6g lux, above the needle %.6g\n",
+		              rad_solver_kind_name(kinds[k]), lux[0], lux[1]);
+		assert_true(isfinite(lux[0]) && lux[0] > 0);
+		assert_true(isfinite(lux[1]) && lux[1] > 0);
+		rad_solver_free(sv);
+	}
+	rad_scene_free(s);
+}
+
+/*
+ * The empty hall (16 sources, 47 polygons), which the report could not
+ * run with its new algorithm: rmb's increments shrink every iteration (no
+ * divergence), every value is finite and non-negative, and its mean
+ * illuminance on the floor agrees with hr's.
+ */
+static void test_rmb_empty_hall(void **state)
+{
+	(void)state;
+	char path[] = "/tmp/luxrad-hall-XXXXXX.glb", cmd[512];
+	int fd = mkstemps(path, 4);
+	assert_true(fd >= 0);
+	close(fd);
+	snprintf(cmd, sizeof(cmd),
+	         "'%s/luxrad-scenegen' hall-empty -o '%s' 2>/dev/null",
+	         LUXRAD_BINARY_DIR, path);
+	assert_int_equal(system(cmd), 0);
+	rad_scene *s = NULL;
+	rad_error err;
+	if (rad_gltf_load_file(path, &s, NULL, &err) != RAD_OK)
+		fail_msg("%s", err.msg);
+	unlink(path);
+	double lo[3], hi[3], pts[25 * 6], mean[2] = {0, 0};
+	rad_scene_bounds(s, lo, hi);
+	for (int i = 0; i < 25; i++) {
+		double *p = pts + 6 * i;
+		p[0] = lo[0] + (0.1 + 0.2 * (i % 5)) * (hi[0] - lo[0]);
+		p[1] = lo[1] + 0.85; /* a work plane */
+		p[2] = lo[2] + (0.1 + 0.2 * (i / 5)) * (hi[2] - lo[2]);
+		p[3] = p[5] = 0, p[4] = 1;
+	}
+	for (int k = 0; k < 2; k++) {
+		rad_options o;
+		rad_options_default(&o);
+		o.solver = k ? RAD_SOLVER_RMB : RAD_SOLVER_HR;
+		o.threads = 2;
+		rad_solver *sv = NULL;
+		assert_int_equal(rad_solver_new(s, &o, &sv, &err), RAD_OK);
+		double last = INFINITY;
+		for (int it = 0; it < 8; it++) {
+			assert_int_equal(rad_solver_step(sv, &err), RAD_OK);
+			rad_stats st;
+			rad_solver_stats(sv, &st);
+			assert_true(isfinite(st.residual));
+			if (k && it > 0)
+				assert_true(st.residual < last);
+			last = st.residual;
+		}
+		leaf_acc a = leaves_of(sv);
+		assert_true(isfinite(a.max_b) && a.min_b >= 0 && a.min_e >= 0);
+		double lux[25];
+		assert_int_equal(rad_solver_illuminance(sv, pts, 25, lux, &err),
+		                 RAD_OK);
+		for (int i = 0; i < 25; i++) {
+			assert_true(isfinite(lux[i]) && lux[i] >= 0);
+			mean[k] += lux[i] / 25;
+		}
+		rad_solver_free(sv);
+	}
+	print_message("empty hall, 8 iterations: work-plane mean hr %.6g, "
+	              "rmb %.6g lux (%+.2f %%)\n",
+	              mean[0], mean[1], 100 * (mean[1] / mean[0] - 1));
+	assert_true(mean[0] > 0 && fabs(mean[1] / mean[0] - 1) < 0.05);
+	rad_scene_free(s);
+}
+
 /* A 10^6 cd and a 1 cd source in one room, at scales 1e-3 and 1e3: the
  * answer scales as it must and is never NaN or negative. */
 static void test_rmb_extremes(void **state)
@@ -238,7 +379,9 @@ static void test_rmb_extremes(void **state)
 				L[i].intensity[c] = i ? 1 : 1e6;
 		}
 		rad_error err;
-		rad_scene *s = make_box(m, 0.8 * m, m, 0.7, 0, &L[0]);
+		/* Both sources: 10^6 cd and 1 cd. */
+		rad_scene *s =
+		        make_box_ext(m, 0.8 * m, m, 0.7, 0, L, 2, NULL, 0);
 		rad_options o;
 		rad_options_default(&o);
 		o.solver = RAD_SOLVER_RMB;
@@ -409,6 +552,8 @@ int main(void)
 	        cmocka_unit_test(test_uniform_box_hr_05),
 	        cmocka_unit_test(test_rmb_extremes),
 	        cmocka_unit_test(test_rmb_box_09),
+	        cmocka_unit_test(test_slivers_stay_finite),
+	        cmocka_unit_test(test_rmb_empty_hall),
 	        cmocka_unit_test(test_rmb_box_099),
 	        cmocka_unit_test(test_uniform_box_hr_09),
 	        cmocka_unit_test(test_uniform_box_hr_099),

@@ -478,6 +478,46 @@ static void test_dump_round_trip(void **state)
 	assert_non_null(strstr(a.text, "max_scene_bytes = 3G\n"));
 }
 
+/* The modbus_* keys: from a file, overridden by a flag, rejected with the
+ * file and line, in the dump, and in --help. */
+static void test_modbus_keys(void **state)
+{
+	(void)state;
+	srv_config c;
+	char msg[512];
+	srv_config_default(&c);
+	assert_string_equal(c.modbus.listen, "127.0.0.1:1502");
+	assert_int_equal(c.modbus.job_slots, 8);
+	const char *conf = write_file("mb.conf", "modbus_word_order = cdab\n"
+	                                         "modbus_job_slots = 12\n"
+	                                         "modbus_listen = none\n");
+	int rc = from_args(&c, msg, sizeof(msg), "--config", conf,
+	                   "--modbus-job-slots", "3", "--modbus-idle-timeout",
+	                   "2m", NULL);
+	if (rc != 0)
+		fail_msg("%s", msg);
+	assert_int_equal(c.modbus.word_order, MB_CDAB);
+	assert_int_equal(c.modbus.job_slots, 3); /* the flag wins */
+	assert_true(c.modbus.idle_timeout_s == 120);
+	assert_string_equal(c.modbus.listen, "");
+	dump_buf a = {{0}};
+	dump_keys(&c, &a);
+	assert_non_null(strstr(a.text, "modbus_listen = none\n"));
+	assert_non_null(strstr(a.text, "modbus_word_order = cdab\n"));
+	assert_non_null(strstr(a.text, "modbus_job_slots = 3\n"));
+
+	const char *bad = write_file("mbbad.conf", "\nmodbus_job_slots = 65\n");
+	srv_config_default(&c);
+	assert_int_equal(srv_config_load_file(&c, bad, 1, msg, sizeof(msg)),
+	                 -1);
+	assert_non_null(strstr(msg, "mbbad.conf:2: "));
+	assert_non_null(strstr(msg, "modbus_job_slots"));
+	rc = from_args(&c, msg, sizeof(msg), "--modbus-word-order", "badc",
+	               NULL);
+	assert_int_equal(rc, -1);
+	assert_non_null(strstr(msg, "--modbus-word-order"));
+}
+
 /* The shipped file documents every key, commented out: it must parse and
  * change nothing, and it must mention every key the dump knows. */
 static void test_shipped_conf_is_the_defaults(void **state)
@@ -566,6 +606,7 @@ int main(void)
 	        cmocka_unit_test(test_flag_errors),
 	        cmocka_unit_test(test_help_and_version),
 	        cmocka_unit_test(test_dump_round_trip),
+	        cmocka_unit_test(test_modbus_keys),
 	        cmocka_unit_test(test_shipped_conf_is_the_defaults),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);

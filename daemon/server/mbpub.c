@@ -1,0 +1,717 @@
+/*
+ * mbpub.c -- luxradd's side of the Modbus server (modbus.h): starts and
+ * stops it, turns jobs, job events and sensors into mb_publish_* calls,
+ * evaluates sensors on each published solution, answers sensor.add /
+ * sensor.list, and reports the server in status and /metrics.
+ *
+ * DESIGN
+ * Everything here runs on the I/O thread except the sensor evaluation
+ * task's run(), which executes on a query thread with its own copy of the
+ * points and a reference on the solution.  Per job, this file keeps a
+ * record (mbp_job: I/O thread only) with the job's sensors -- the scene's,
+ * then those added with sensor.add -- their latest value, and the error
+ * estimates of the last two iterations (for the progress and the ETA).
+ *
+ * Hooks (one line each in the daemon's files):
+ *   srv_listen            srv_mb_start (exit 2 when it cannot bind)
+ *   write_addr_file       "modbus HOST:PORT" line (srv_mb_addr_text)
+ *   srv_run's timer       srv_mb_tick: daemon block, once a second
+ *   create_done           srv_mb_job_added
+ *   srv_recover           srv_mb_recovered (restored jobs, id order)
+ *   srv_publish_event     srv_mb_job_event (state, iteration, progress)
+ *   srv_publish_state_now srv_mb_job_event (I/O-thread state changes)
+ *   srv_publish_job_gone  srv_mb_job_gone (job.delete)
+ *   srv_destroy           srv_mb_stop, after the workers are joined
+ *
+ * Sensor values.  After each iteration event the job's latest solution
+ * is evaluated at every sensor with rad_solution_illuminance -- the call
+ * query.points makes, with the same 6 doubles per point -- on the query
+ * pool; the result is published on the I/O thread, per sensor only when
+ * its iteration is newer than the one published (two evaluations may
+ * finish out of order).  Sensors added with sensor.add live in memory:
+ * they are not persisted, a restart forgets them (the scene's come back
+ * from the stored scene bytes).
+ *
+ * Progress (0..1, of the current run target):
+ *   iterations  (iteration - first iteration of the run) / n;
+ *   seconds     budget used / budget;
+ *   converge    the larger of iteration / max_iterations and the
+ *               log-scale way from the job's first error estimate to
+ *               the tolerance: log(e0 / e) / log(e0 / tol);
+ *   done        1; never run: unknown (NaN).
+ * ETA (seconds): iterations left x the last iteration's time; seconds
+ * mode: the budget left; converge: the iterations the error-estimate
+ * trend needs (e_k = e * rho^k, rho = e / e_prev when 0 < rho < 1, at
+ * most max_iterations - iteration) x the last iteration's time; 0 when
+ * done; unknown (NaN) when paused, failed, cancelled or without a trend.
+ */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "log.h"
+#include "modbus.h"
+#include "server.h"
+
+typedef struct mbp_sensor {
+	char name[MB_SENSOR_NAME_MAX];
+	double pt[6]; /* x y z nx ny nz, as query.points takes them */
+	int added;    /* sensor.add (else from the scene) */
+	int64_t iter; /* iteration of lux; -1 = none yet */
+	double lux;
+} mbp_sensor;
+
+typedef struct mbp_job {
+	uint64_t id;
+	mbp_sensor *sensors;
+	size_t n, cap;
+	int64_t stats_iter; /* iteration the numbers below come from */
+	double err, err_prev, err_first, iter_s, total_s;
+	struct mbp_job *next;
+} mbp_job;
+
+struct srv_mbpub {
+	mbp_job *jobs;
+	double next_daemon; /* rad_seconds() of the next daemon block */
+};
+
+/* ------------------------------------------------------------ records */
+
+static struct srv_mbpub *state(srv *s)
+{
+	if (!s->mbpub)
+		s->mbpub = calloc(1, sizeof(*s->mbpub));
+	return s->mbpub;
+}
+
+static mbp_job *find_job(srv *s, uint64_t id)
+{
+	struct srv_mbpub *m = s->mbpub;
+	for (mbp_job *p = m ? m->jobs : NULL; p; p = p->next)
+		if (p->id == id)
+			return p;
+	return NULL;
+}
+
+static mbp_sensor *find_sensor(mbp_job *p, const char *name)
+{
+	for (size_t i = 0; i < p->n; i++)
+		if (strcmp(p->sensors[i].name, name) == 0)
+			return &p->sensors[i];
+	return NULL;
+}
+
+static mbp_sensor *add_sensor(mbp_job *p, const char *name, const double pt[6],
+                              int added)
+{
+	if (p->n == p->cap) {
+		size_t nc = p->cap ? 2 * p->cap : 8;
+		mbp_sensor *ns = realloc(p->sensors, nc * sizeof(*ns));
+		if (!ns)
+			return NULL;
+		p->sensors = ns;
+		p->cap = nc;
+	}
+	mbp_sensor *x = &p->sensors[p->n++];
+	memset(x, 0, sizeof(*x));
+	snprintf(x->name, sizeof(x->name), "%s", name);
+	memcpy(x->pt, pt, sizeof(x->pt));
+	x->added = added;
+	x->iter = -1;
+	x->lux = NAN;
+	return x;
+}
+
+/* The job's record, made with the scene's sensors the first time. */
+static mbp_job *job_record(srv *s, srv_job *j)
+{
+	mbp_job *p = find_job(s, j->id);
+	struct srv_mbpub *m = state(s);
+	if (p || !m)
+		return p;
+	p = calloc(1, sizeof(*p));
+	if (!p)
+		return NULL;
+	p->id = j->id;
+	p->stats_iter = -1;
+	p->err = p->err_prev = p->err_first = NAN;
+	p->iter_s = p->total_s = NAN;
+	for (size_t i = 0; i < j->scene->nsensors; i++) {
+		const rad_gltf_sensor *g = &j->scene->sensors[i];
+		double pt[6] = {g->position[0], g->position[1], g->position[2],
+		                g->normal[0],   g->normal[1],   g->normal[2]};
+		if (!add_sensor(p, g->name, pt, 0))
+			srv_warn("job %llu: out of memory for sensor '%s'",
+			         (unsigned long long)j->id, g->name);
+	}
+	p->next = m->jobs;
+	m->jobs = p;
+	return p;
+}
+
+static void free_job(mbp_job *p)
+{
+	free(p->sensors);
+	free(p);
+}
+
+/* ------------------------------------------------------------- values */
+
+static mb_job_state mb_state_of(srv_job_state st)
+{
+	return (mb_job_state)((int)st + 1); /* same order, 0 = empty */
+}
+
+/* Take the error estimate and timings from the latest stats text. */
+static void update_stats(mbp_job *p, uint32_t iter, const char *text)
+{
+	json_t *o = text ? json_loads(text, 0, NULL) : NULL;
+	if (!o)
+		return;
+	json_t *e = json_object_get(o, "error_estimate");
+	json_t *sec = json_object_get(o, "seconds");
+	json_t *tot = json_object_get(o, "seconds_total");
+	double err = json_is_number(e) ? json_number_value(e) : NAN;
+	if ((int64_t)iter == p->stats_iter + 1)
+		p->err_prev = p->err;
+	else
+		p->err_prev = NAN; /* no trend across a gap */
+	p->err = err;
+	if (isnan(p->err_first) && isfinite(err) && err > 0)
+		p->err_first = err;
+	p->iter_s = json_is_number(sec) ? json_number_value(sec) : NAN;
+	p->total_s = json_is_number(tot) ? json_number_value(tot) : NAN;
+	p->stats_iter = iter;
+	json_decref(o);
+}
+
+static double clamp01(double x)
+{
+	return x < 0 ? 0 : x > 1 ? 1 : x;
+}
+
+typedef struct job_snap {
+	srv_job_state st;
+	uint32_t iter;
+	double residual;
+	uint64_t links;
+	int64_t mem;
+	job_target t;
+	double deadline;
+	char *stats; /* copy, when newer than the record's */
+} job_snap;
+
+static double progress_of(const job_snap *js, const mbp_job *p,
+                          const srv_job *j, double now)
+{
+	const job_target *t = &js->t;
+	if (js->st == SRV_JOB_DONE)
+		return 1;
+	if (t->mode == JOB_MODE_NONE)
+		return NAN;
+	if (t->complete)
+		return 1;
+	switch (t->mode) {
+	case JOB_MODE_ITERATIONS: {
+		if (t->n == 0)
+			return 1;
+		double first = (double)t->until - (double)t->n;
+		return clamp01(((double)js->iter - first) / (double)t->n);
+	}
+	case JOB_MODE_SECONDS: {
+		if (!(t->seconds > 0))
+			return 1;
+		double left = js->st == SRV_JOB_RUNNING && js->deadline > 0
+		                      ? js->deadline - now
+		                      : t->left_s;
+		return clamp01(1 - left / t->seconds);
+	}
+	case JOB_MODE_CONVERGE: {
+		double pi = j->max_iter > 0
+		                    ? (double)js->iter / (double)j->max_iter
+		                    : 0;
+		double pe = 0;
+		if (p && p->err_first > j->tol && p->err > 0 && j->tol > 0)
+			pe = log(p->err_first / p->err) /
+			     log(p->err_first / j->tol);
+		return clamp01(pi > pe ? pi : pe);
+	}
+	default:
+		return NAN;
+	}
+}
+
+static double eta_of(const job_snap *js, const mbp_job *p, const srv_job *j,
+                     double now)
+{
+	const job_target *t = &js->t;
+	if (js->st == SRV_JOB_DONE)
+		return 0;
+	if (js->st != SRV_JOB_RUNNING && js->st != SRV_JOB_QUEUED)
+		return NAN;
+	double it = p ? p->iter_s : NAN;
+	switch (t->mode) {
+	case JOB_MODE_ITERATIONS:
+		return t->until > js->iter ? (double)(t->until - js->iter) * it
+		                           : 0;
+	case JOB_MODE_SECONDS:
+		if (js->st == SRV_JOB_RUNNING && js->deadline > 0)
+			return js->deadline > now ? js->deadline - now : 0;
+		return t->left_s;
+	case JOB_MODE_CONVERGE: {
+		if (!p || !(p->err > 0) || !(j->tol > 0))
+			return NAN;
+		if (p->err <= j->tol)
+			return 0;
+		double rho = p->err / p->err_prev;
+		if (!(rho > 0 && rho < 1))
+			return NAN;
+		double k = ceil(log(j->tol / p->err) / log(rho));
+		double cap = j->max_iter > js->iter
+		                     ? (double)(j->max_iter - js->iter)
+		                     : 0;
+		return (k < cap ? k : cap) * it;
+	}
+	default:
+		return NAN;
+	}
+}
+
+/* Publish a job's values (I/O thread). */
+static void publish_job(srv *s, srv_job *j)
+{
+	mbp_job *p = job_record(s, j);
+	job_snap js = {0};
+	double now = rad_seconds();
+
+	pthread_mutex_lock(&j->mu);
+	js.st = j->state;
+	js.iter = j->iteration;
+	js.residual = j->residual;
+	js.links = j->links;
+	js.mem = srv_job_memory_locked(j);
+	js.t = j->target;
+	js.deadline = j->deadline;
+	if (p && j->stats_json && p->stats_iter != (int64_t)j->iteration)
+		js.stats = strdup(j->stats_json);
+	pthread_mutex_unlock(&j->mu);
+	if (p && js.stats)
+		update_stats(p, js.iter, js.stats);
+	free(js.stats);
+
+	mb_job_vals v;
+	mb_job_vals_init(&v, j->id);
+	v.scene_id = j->scene->id;
+	v.state = mb_state_of(js.st);
+	v.iteration = js.iter;
+	v.progress = progress_of(&js, p, j, now);
+	if (js.iter > 0) {
+		v.residual = js.residual;
+		v.links = (int64_t)js.links;
+	}
+	v.error_estimate = p ? p->err : NAN;
+	v.memory_bytes = js.mem;
+	v.elapsed_s = p ? p->total_s : NAN;
+	v.eta_s = eta_of(&js, p, j, now);
+	mb_publish_job(s->mb, &v);
+}
+
+/* ------------------------------------------------------------ sensors */
+
+typedef struct eval_task {
+	srv_task t;
+	uint64_t job;
+	srv_sol *sol; /* ref */
+	size_t n;
+	char (*names)[MB_SENSOR_NAME_MAX];
+	double *pts, *lux;
+	int ok;
+	char err[sizeof(((rad_error *)0)->msg)];
+} eval_task;
+
+static void eval_free(srv *s, eval_task *e)
+{
+	srv_sol_unref(s, e->sol);
+	free(e->names);
+	free(e->pts);
+	free(e->lux);
+	free(e);
+}
+
+static void eval_run(srv *s, srv_task *t)
+{
+	eval_task *e = (eval_task *)t;
+	rad_error err = {0};
+	(void)s;
+	e->ok = rad_solution_illuminance(e->sol->sol, e->pts, e->n, e->lux,
+	                                 &err) == RAD_OK;
+	if (!e->ok)
+		snprintf(e->err, sizeof(e->err), "%s", err.msg);
+	/* the pool posts the task to the I/O thread: eval_done */
+}
+
+/* I/O thread: publish what is newer than what each sensor shows. */
+static void eval_apply(srv *s, eval_task *e)
+{
+	mbp_job *p = find_job(s, e->job);
+	if (!p)
+		return; /* deleted meanwhile */
+	if (!e->ok) {
+		srv_warn("job %llu: sensors not evaluated at iteration %u: %s",
+		         (unsigned long long)e->job, e->sol->iteration, e->err);
+		return;
+	}
+	for (size_t i = 0; i < e->n; i++) {
+		mbp_sensor *x = find_sensor(p, e->names[i]);
+		if (!x || x->iter >= (int64_t)e->sol->iteration)
+			continue;
+		x->iter = e->sol->iteration;
+		x->lux = e->lux[i];
+		mb_publish_sensor(s->mb, e->job, x->name, x->lux,
+		                  e->sol->iteration);
+	}
+}
+
+static void eval_done(srv *s, srv_task *t)
+{
+	eval_task *e = (eval_task *)t;
+	eval_apply(s, e);
+	eval_free(s, e);
+}
+
+/*
+ * Evaluate sensors [from, p->n) of a job on its latest solution: on the
+ * query pool, or on this thread when the pool is not running (startup,
+ * shutdown).
+ */
+static void evaluate(srv *s, srv_job *j, mbp_job *p, size_t from)
+{
+	if (!p || from >= p->n)
+		return;
+	pthread_mutex_lock(&j->mu);
+	srv_sol *sol = j->sol;
+	if (sol)
+		srv_sol_ref(sol);
+	pthread_mutex_unlock(&j->mu);
+	if (!sol)
+		return;
+	size_t n = p->n - from, fresh = 0;
+	for (size_t i = from; i < p->n; i++)
+		fresh += p->sensors[i].iter < (int64_t)sol->iteration;
+	eval_task *e = calloc(1, sizeof(*e));
+	if (e) {
+		e->names = malloc(n * sizeof(*e->names));
+		e->pts = malloc(n * 6 * sizeof(double));
+		e->lux = malloc(n * sizeof(double));
+	}
+	if (!e) {
+		srv_sol_unref(s, sol);
+		srv_warn("job %llu: out of memory evaluating sensors",
+		         (unsigned long long)j->id);
+		return;
+	}
+	e->sol = sol; /* eval_free releases it */
+	if (!fresh || !e->names || !e->pts || !e->lux) {
+		if (fresh)
+			srv_warn("job %llu: out of memory evaluating sensors",
+			         (unsigned long long)j->id);
+		eval_free(s, e);
+		return;
+	}
+	e->job = j->id;
+	e->n = n;
+	for (size_t i = 0; i < n; i++) {
+		memcpy(e->names[i], p->sensors[from + i].name,
+		       MB_SENSOR_NAME_MAX);
+		memcpy(e->pts + 6 * i, p->sensors[from + i].pt,
+		       6 * sizeof(double));
+	}
+	if (s->query_pool.threads && !s->shutting_down) {
+		e->t.run = eval_run;
+		e->t.done = eval_done;
+		srv_pool_submit(&s->query_pool, &e->t);
+		return;
+	}
+	rad_error err = {0};
+	e->ok = rad_solution_illuminance(sol->sol, e->pts, n, e->lux, &err) ==
+	        RAD_OK;
+	if (!e->ok)
+		snprintf(e->err, sizeof(e->err), "%s", err.msg);
+	eval_apply(s, e);
+	eval_free(s, e);
+}
+
+/* -------------------------------------------------------------- hooks */
+
+static void mb_log(void *ud, int level, const char *msg)
+{
+	(void)ud;
+	srv_log(level <= 0   ? SRV_LOG_ERROR
+	        : level == 1 ? SRV_LOG_WARN
+	        : level == 2 ? SRV_LOG_INFO
+	                     : SRV_LOG_DEBUG,
+	        "%s", msg);
+}
+
+int srv_mb_start(srv *s, char *msg, size_t msglen)
+{
+	char why[1024] = "";
+	if (!state(s)) {
+		snprintf(msg, msglen, "modbus: out of memory");
+		return -2;
+	}
+	if (!s->cfg.modbus.listen[0]) {
+		srv_info("modbus: off (modbus_listen = none)");
+		return 0;
+	}
+	s->mb = mb_server_start(&s->cfg.modbus, mb_log, NULL, why, sizeof(why));
+	if (!s->mb) {
+		snprintf(msg, msglen, "%s", why);
+		return -2;
+	}
+	srv_mb_tick(s, rad_seconds());
+	return 0;
+}
+
+void srv_mb_stop(srv *s)
+{
+	mb_server_stop(s->mb);
+	s->mb = NULL;
+	if (!s->mbpub)
+		return;
+	while (s->mbpub->jobs) {
+		mbp_job *p = s->mbpub->jobs;
+		s->mbpub->jobs = p->next;
+		free_job(p);
+	}
+	free(s->mbpub);
+	s->mbpub = NULL;
+}
+
+int srv_mb_addr_text(srv *s, char *buf, size_t len)
+{
+	char host[300], why[200];
+	int port = mb_server_port(s->mb);
+	if (!s->mb || port < 0 ||
+	    mb_listen_parse(s->cfg.modbus.listen, host, sizeof(host), &port,
+	                    why, sizeof(why)) != 0)
+		return 0;
+	port = mb_server_port(s->mb);
+	snprintf(buf, len,
+	         strchr(host, ':') ? "modbus [%s]:%d" : "modbus %s:%d", host,
+	         port);
+	return 1;
+}
+
+void srv_mb_tick(srv *s, double now)
+{
+	struct srv_mbpub *m = s->mbpub;
+	if (!s->mb || !m || now < m->next_daemon)
+		return;
+	m->next_daemon = now + 1.0;
+	srv_summary sum;
+	srv_summarize(s, &sum);
+	mb_publish_daemon(s->mb, &(mb_daemon_vals){s->t0, sum.total});
+}
+
+void srv_mb_job_added(srv *s, srv_job *j)
+{
+	mbp_job *p = job_record(s, j);
+	publish_job(s, j);
+	for (size_t i = 0; p && i < p->n; i++)
+		mb_publish_sensor(s->mb, j->id, p->sensors[i].name, NAN, 0);
+	evaluate(s, j, p, 0); /* a restored job's solution */
+}
+
+static int cmp_job_id(const void *a, const void *b)
+{
+	uint64_t x = (*(srv_job *const *)a)->id;
+	uint64_t y = (*(srv_job *const *)b)->id;
+	return x < y ? -1 : x > y;
+}
+
+void srv_mb_recovered(srv *s)
+{
+	size_t n = 0, k = 0;
+	for (srv_job *j = s->jobs; j; j = j->next)
+		n++;
+	srv_job **v = n ? malloc(n * sizeof(*v)) : NULL;
+	if (n && !v) {
+		srv_warn("modbus: out of memory publishing restored jobs");
+		return;
+	}
+	for (srv_job *j = s->jobs; j; j = j->next)
+		v[k++] = j;
+	if (n > 1) /* qsort's array must not be NULL, even for n = 0 */
+		qsort(v, n, sizeof(*v), cmp_job_id);
+	for (size_t i = 0; i < n; i++)
+		srv_mb_job_added(s, v[i]);
+	free(v);
+	if (s->mbpub)
+		s->mbpub->next_daemon = 0;
+	srv_mb_tick(s, rad_seconds());
+}
+
+void srv_mb_job_event(srv *s, srv_job *j, ev_kind ev)
+{
+	publish_job(s, j);
+	if (ev == EV_ITERATION)
+		evaluate(s, j, find_job(s, j->id), 0);
+}
+
+void srv_mb_job_gone(srv *s, srv_job *j)
+{
+	struct srv_mbpub *m = s->mbpub;
+	mb_job_remove(s->mb, j->id);
+	for (mbp_job **pp = m ? &m->jobs : NULL; pp && *pp; pp = &(*pp)->next) {
+		if ((*pp)->id == j->id) {
+			mbp_job *p = *pp;
+			*pp = p->next;
+			free_job(p);
+			break;
+		}
+	}
+}
+
+json_t *srv_mb_status_json(srv *s)
+{
+	mb_stats st;
+	json_t *o = json_object();
+	mb_server_stats(s->mb, &st);
+	if (!s->mb)
+		st.state = MB_STATE_OFF;
+	json_object_set_new(o, "state", json_string(mb_state_name(st.state)));
+	json_object_set_new(o, "listen",
+	                    s->cfg.modbus.listen[0]
+	                            ? json_string(s->cfg.modbus.listen)
+	                            : json_null());
+	json_object_set_new(o, "port",
+	                    s->mb && st.port >= 0 ? json_integer(st.port)
+	                                          : json_null());
+	json_object_set_new(o, "unit_id", json_integer(s->cfg.modbus.unit_id));
+#define MB_STAT_JSON_(name, help)                                              \
+	json_object_set_new(o, #name, json_integer((json_int_t)st.name));
+	MB_STATS(MB_STAT_JSON_)
+#undef MB_STAT_JSON_
+	return o;
+}
+
+char *srv_mb_metrics_text(srv *s)
+{
+	mb_stats st;
+	char *buf = NULL;
+	size_t len = 0;
+	FILE *f = open_memstream(&buf, &len);
+	if (!f)
+		return NULL;
+	mb_server_stats(s->mb, &st);
+	if (!s->mb)
+		st.state = MB_STATE_OFF;
+	fprintf(f,
+	        "# HELP luxradd_modbus_up 1 when the Modbus server is "
+	        "listening.\n# TYPE luxradd_modbus_up gauge\n"
+	        "luxradd_modbus_up %d\n",
+	        st.state == MB_STATE_LISTENING);
+	fprintf(f,
+	        "# HELP luxradd_modbus_clients Modbus clients connected "
+	        "now.\n# TYPE luxradd_modbus_clients gauge\n"
+	        "luxradd_modbus_clients %llu\n",
+	        (unsigned long long)st.clients);
+#define MB_STAT_PROM_(name, help)                                              \
+	if (strcmp(#name, "clients") != 0)                                     \
+		fprintf(f,                                                     \
+		        "# HELP luxradd_modbus_" #name "_total Modbus " help   \
+		        ".\n# TYPE luxradd_modbus_" #name "_total counter\n"   \
+		        "luxradd_modbus_" #name "_total %llu\n",               \
+		        (unsigned long long)st.name);
+	MB_STATS(MB_STAT_PROM_)
+#undef MB_STAT_PROM_
+	if (fclose(f) != 0) {
+		free(buf);
+		return NULL;
+	}
+	return buf;
+}
+
+/* ----------------------------------------------------------- commands */
+
+static json_t *sensor_json(srv *s, uint64_t job, const mbp_sensor *x)
+{
+	json_t *o = json_object(), *pt = json_array();
+	for (int k = 0; k < 6; k++)
+		json_array_append_new(pt, json_real(x->pt[k]));
+	json_object_set_new(o, "name", json_string(x->name));
+	json_object_set_new(o, "point", pt);
+	json_object_set_new(o, "source",
+	                    json_string(x->added ? "added" : "scene"));
+	json_object_set_new(o, "lux", srv_jreal(x->lux));
+	json_object_set_new(o, "iteration",
+	                    x->iter >= 0 ? json_integer(x->iter) : json_null());
+	int slot = mb_sensor_slot(s->mb, job, x->name);
+	json_object_set_new(o, "slot",
+	                    slot >= 0 ? json_integer(slot) : json_null());
+	return o;
+}
+
+cmd_result srv_cmd_sensor_add(srv_req *r)
+{
+	srv *s = r->s;
+	int failed;
+	const char *name;
+	double pt[6];
+	srv_job *j = srv_req_job(r, &failed);
+	if (failed)
+		return CMD_ERROR;
+	if (rp_arg_string(r->hdr, "name", 1, &name, &r->err) != 0 ||
+	    rp_arg_vec(r->hdr, "point", 1, pt, 6, &r->err) != 0)
+		return CMD_ERROR;
+	size_t nl = strlen(name);
+	if (nl == 0 || nl >= MB_SENSOR_NAME_MAX)
+		return srv_req_fail(r, RP_ERR_BAD_REQUEST,
+		                    "\"name\" must be 1..%d bytes",
+		                    MB_SENSOR_NAME_MAX - 1);
+	for (size_t i = 0; i < nl; i++)
+		if ((unsigned char)name[i] < 0x20 || name[i] == 0x7f)
+			return srv_req_fail(r, RP_ERR_BAD_REQUEST,
+			                    "\"name\" has a control character");
+	if (pt[3] == 0 && pt[4] == 0 && pt[5] == 0)
+		return srv_req_fail(r, RP_ERR_BAD_REQUEST,
+		                    "\"point\": the normal (elements 4..6) is "
+		                    "zero");
+	mbp_job *p = job_record(s, j);
+	if (!p)
+		return srv_req_fail(r, RP_ERR_NOMEM, "out of memory");
+	if (find_sensor(p, name))
+		return srv_req_fail(r, RP_ERR_STATE,
+		                    "job %llu already has a sensor '%s'",
+		                    (unsigned long long)j->id, name);
+	mbp_sensor *x = add_sensor(p, name, pt, 1);
+	if (!x)
+		return srv_req_fail(r, RP_ERR_NOMEM, "out of memory");
+	int slot = mb_publish_sensor(s->mb, j->id, x->name, NAN, 0);
+	srv_info("job %llu: sensor '%s' added (slot %d)",
+	         (unsigned long long)j->id, x->name, slot);
+	evaluate(s, j, p, p->n - 1);
+	json_object_set_new(r->res, "job", json_integer((json_int_t)j->id));
+	json_object_set_new(r->res, "name", json_string(x->name));
+	json_object_set_new(r->res, "slot",
+	                    slot >= 0 ? json_integer(slot) : json_null());
+	return CMD_REPLY;
+}
+
+cmd_result srv_cmd_sensor_list(srv_req *r)
+{
+	int failed;
+	srv_job *j = srv_req_job(r, &failed);
+	if (failed)
+		return CMD_ERROR;
+	mbp_job *p = job_record(r->s, j);
+	json_t *arr = json_array();
+	for (size_t i = 0; p && i < p->n; i++)
+		json_array_append_new(arr,
+		                      sensor_json(r->s, j->id, &p->sensors[i]));
+	json_object_set_new(r->res, "job", json_integer((json_int_t)j->id));
+	json_object_set_new(r->res, "sensors", arr);
+	return CMD_REPLY;
+}
