@@ -34,48 +34,6 @@ static double jdbl(const json_t *o, const char *k)
 
 /* ---------------------------------------------------------- points file */
 
-/*
- * One line of a points file (comment already cut): 1 and p filled for a
- * point, 0 for a blank line, -1 with *why.  The same rules as
- * luxrad-solve --points: six finite numbers separated by blanks.
- */
-static int parse_point_line(char *s, double p[6], const char **why)
-{
-	int k = 0;
-	char *end;
-
-	for (;;) {
-		while (*s == ' ' || *s == '\t' || *s == '\r' || *s == '\n')
-			s++;
-		if (*s == '\0')
-			break;
-		if (k == 6) {
-			*why = "more than 6 numbers";
-			return -1;
-		}
-		errno = 0;
-		p[k] = strtod(s, &end);
-		if (end == s || !isfinite(p[k]) || errno == ERANGE ||
-		    (*end && !strchr(" \t\r\n", *end))) {
-			*why = "not a finite number";
-			return -1;
-		}
-		k++;
-		s = end;
-	}
-	if (k == 0)
-		return 0;
-	if (k != 6) {
-		*why = "expected 6 numbers: x y z nx ny nz";
-		return -1;
-	}
-	if (p[3] == 0 && p[4] == 0 && p[5] == 0) {
-		*why = "the normal is zero";
-		return -1;
-	}
-	return 1;
-}
-
 int lx_points_load(const char *path, json_t **points, size_t *n)
 {
 	FILE *f = fopen(path, "r");
@@ -100,7 +58,7 @@ int lx_points_load(const char *path, json_t **points, size_t *n)
 		lineno++;
 		if (hash)
 			*hash = '\0';
-		int r = parse_point_line(line, p, &why);
+		int r = rp_point_line_parse(line, p, &why);
 		if (r < 0) {
 			fprintf(stderr, "luxrad: %s:%lu: %s\n", path, lineno,
 			        why);

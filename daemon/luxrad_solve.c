@@ -30,6 +30,7 @@
 #include "export.h"
 #include "gltf.h"
 #include "rad.h"
+#include "rp.h"
 
 enum { EXIT_OKAY = 0, EXIT_SOLVE = 1, EXIT_USAGE = 2 };
 
@@ -376,47 +377,6 @@ typedef struct point_list {
 	size_t n, cap;
 } point_list;
 
-/*
- * Parse one points-file line into p (comments already cut).  Returns 1 for
- * a point, 0 for a blank line, -1 with a reason in *why if malformed.
- */
-static int parse_point_line(char *line, double p[6], const char **why)
-{
-	char *s = line, *end;
-	int k = 0;
-
-	for (;;) {
-		while (*s == ' ' || *s == '\t' || *s == '\r' || *s == '\n')
-			s++;
-		if (*s == '\0')
-			break;
-		if (k == 6) {
-			*why = "more than 6 numbers";
-			return -1;
-		}
-		errno = 0;
-		p[k] = strtod(s, &end);
-		if (end == s || !isfinite(p[k]) || errno == ERANGE ||
-		    (*end && !strchr(" \t\r\n", *end))) {
-			*why = "not a finite number";
-			return -1;
-		}
-		k++;
-		s = end;
-	}
-	if (k == 0)
-		return 0;
-	if (k != 6) {
-		*why = "expected 6 numbers: x y z nx ny nz";
-		return -1;
-	}
-	if (p[3] == 0 && p[4] == 0 && p[5] == 0) {
-		*why = "the normal is zero";
-		return -1;
-	}
-	return 1;
-}
-
 static int points_push(point_list *pl, const double p[6])
 {
 	if (pl->n == pl->cap) {
@@ -454,7 +414,7 @@ static int load_points(const char *path, point_list *pl)
 		lineno++;
 		if (hash)
 			*hash = '\0';
-		int r = parse_point_line(line, p, &why);
+		int r = rp_point_line_parse(line, p, &why);
 		if (r < 0) {
 			fprintf(stderr, "luxrad-solve: %s:%lu: %s\n", path,
 			        lineno, why);

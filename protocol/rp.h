@@ -262,6 +262,14 @@ int rp_addr_parse(const char *text, rp_addr *out, rp_error *err);
 int rp_addr_is_loopback(const rp_addr *a);
 
 /* ------------------------------------------------------------- utilities */
+/*
+ * One line of a points file (the format of luxrad --points and
+ * luxrad-solve --points), '#' comment already cut: six finite numbers
+ * "x y z nx ny nz" separated by blanks, the normal not zero.  Returns 1
+ * and fills p for a point, 0 for a blank line, -1 with a reason in *why.
+ */
+int rp_point_line_parse(const char *line, double p[6], const char **why);
+
 /* Constant-time comparison of two byte strings (lengths may differ). */
 int rp_token_equal(const void *a, size_t alen, const void *b, size_t blen);
 

@@ -9,10 +9,12 @@
  */
 #include "rp.h"
 
+#include <errno.h>
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
+#include <string.h>
 
 static void arg_err(rp_error *err, const char *fmt, ...)
         __attribute__((format(printf, 2, 3)));
@@ -254,4 +256,44 @@ int rp_arg_points(const json_t *obj, const char *key, size_t max_points,
 	*out = p;
 	*n = count;
 	return 0;
+}
+
+/* ------------------------------------------------------------ points file */
+
+int rp_point_line_parse(const char *line, double p[6], const char **why)
+{
+	const char *s = line;
+	char *end;
+	int k = 0;
+
+	for (;;) {
+		while (*s == ' ' || *s == '\t' || *s == '\r' || *s == '\n')
+			s++;
+		if (*s == '\0')
+			break;
+		if (k == 6) {
+			*why = "more than 6 numbers";
+			return -1;
+		}
+		errno = 0;
+		p[k] = strtod(s, &end);
+		if (end == s || !isfinite(p[k]) || errno == ERANGE ||
+		    (*end && !strchr(" \t\r\n", *end))) {
+			*why = "not a finite number";
+			return -1;
+		}
+		k++;
+		s = end;
+	}
+	if (k == 0)
+		return 0;
+	if (k != 6) {
+		*why = "expected 6 numbers: x y z nx ny nz";
+		return -1;
+	}
+	if (p[3] == 0 && p[4] == 0 && p[5] == 0) {
+		*why = "the normal is zero";
+		return -1;
+	}
+	return 1;
 }

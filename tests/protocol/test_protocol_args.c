@@ -491,6 +491,26 @@ static void test_protocol_md_tables_match_header(void **state)
 	free(doc);
 }
 
+/* Points-file lines, the format shared by luxrad and luxrad-solve. */
+static void test_point_lines(void **state)
+{
+	(void)state;
+	double p[6];
+	const char *why = NULL;
+	assert_int_equal(rp_point_line_parse(" 1 2 3\t0 1 0\r\n", p, &why), 1);
+	assert_true(p[0] == 1 && p[2] == 3 && p[4] == 1);
+	assert_int_equal(rp_point_line_parse("   \n", p, &why), 0);
+	assert_int_equal(rp_point_line_parse("", p, &why), 0);
+	const char *bad[] = {"1 2 3 0 0 0",  "1 2 3 0 1",     "1 2 3 0 1 0 7",
+	                     "1 2 x 0 1 0",  "1 2 3 0 1 nan", "1 2 3 0 1 1e999",
+	                     "1 2 3,0 1 0 0"};
+	for (size_t i = 0; i < sizeof(bad) / sizeof(bad[0]); i++) {
+		why = NULL;
+		assert_int_equal(rp_point_line_parse(bad[i], p, &why), -1);
+		assert_non_null(why);
+	}
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -503,6 +523,7 @@ int main(void)
 	        cmocka_unit_test(test_token_compare),
 	        cmocka_unit_test(test_grid_spacing_reference_values),
 	        cmocka_unit_test(test_protocol_md_tables_match_header),
+	        cmocka_unit_test(test_point_lines),
 	};
 	if (getenv("LUXRAD_TEST_FILTER"))
 		cmocka_set_test_filter(getenv("LUXRAD_TEST_FILTER"));
