@@ -159,9 +159,7 @@ json_t *srv_scene_json(const srv_scene *sc)
 	warnings_text(sc, warn, sizeof(warn));
 	json_object_set_new(o, "scene", json_integer((json_int_t)sc->id));
 	json_object_set_new(o, "name", json_string(sc->name));
-	/* A top-level "bytes" in a header announces a payload, so the
-	 * encoder drops it from replies: the size also goes as size_bytes. */
-	json_object_set_new(o, "bytes", json_integer((json_int_t)sc->bytes));
+	/* Not "bytes": at the top of a header that announces a payload. */
 	json_object_set_new(o, "size_bytes",
 	                    json_integer((json_int_t)sc->bytes));
 	json_object_set_new(o, "counts", counts);
