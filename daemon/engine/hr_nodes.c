@@ -361,9 +361,32 @@ static void node_box(const rad_hier *h, uint32_t t, double lo[3], double hi[3])
 	}
 }
 
+/*
+ * A light's "form factor" is irradiance per unit of intensity: at most
+ * 1 / d^2 (lux per cd) from a point or spot at distance d from the
+ * receiver's box, at most 1 (lux per lux) from a directional light.
+ */
+static double light_ff_bound(const rad_hier *h, uint32_t rcv, uint32_t src)
+{
+	const rad_light *L = &h->scene->lights[src & ~RAD_TAG_MASK];
+	if (L->kind == RAD_LIGHT_DIRECTIONAL)
+		return 1;
+	double lo[3], hi[3], d2 = 0;
+	node_box(h, rcv, lo, hi);
+	for (int k = 0; k < 3; k++) {
+		double gap =
+		        fmax(0, fmax(lo[k] - L->pos[k], L->pos[k] - hi[k]));
+		d2 += gap * gap;
+	}
+	/* Inside the box: no finite bound; the caller refines. */
+	return d2 > 0 ? 1 / d2 : 1e30;
+}
+
 double node_ff_bound(const rad_hier *h, uint32_t rcv, uint32_t src)
 {
 	double rl[3], rh[3], sl[3], sh[3], d2 = 0;
+	if (node_is_light(src))
+		return light_ff_bound(h, rcv, src);
 	node_box(h, rcv, rl, rh);
 	node_box(h, src, sl, sh);
 	for (int k = 0; k < 3; k++) {

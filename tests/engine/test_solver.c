@@ -359,6 +359,37 @@ static void test_rmb_empty_hall(void **state)
 	rad_scene_free(s);
 }
 
+/*
+ * Regression: a cluster pair whose samples miss a point light got its
+ * bound from the light's id read as an element (a crash in hr and rmb on
+ * the office scene at eps 1e-3, one thread).
+ */
+static void test_light_zero_link_bound(void **state)
+{
+	(void)state;
+	rad_scene *s = NULL;
+	rad_error err;
+	if (rad_gltf_load_file(LUXRAD_SOURCE_DIR "/scenes/office.gltf", &s,
+	                       NULL, &err) != RAD_OK)
+		fail_msg("%s", err.msg);
+	const rad_solver_kind kinds[2] = {RAD_SOLVER_HR, RAD_SOLVER_RMB};
+	for (int k = 0; k < 2; k++) {
+		rad_options o;
+		rad_options_default(&o);
+		o.solver = kinds[k];
+		o.threads = 1;
+		o.eps = 1e-3;
+		rad_solver *sv = NULL;
+		assert_int_equal(rad_solver_new(s, &o, &sv, &err), RAD_OK);
+		for (int i = 0; i < 8; i++)
+			assert_int_equal(rad_solver_step(sv, &err), RAD_OK);
+		leaf_acc a = leaves_of(sv);
+		assert_true(isfinite(a.max_b) && a.min_b >= 0);
+		rad_solver_free(sv);
+	}
+	rad_scene_free(s);
+}
+
 /* A 10^6 cd and a 1 cd source in one room, at scales 1e-3 and 1e3: the
  * answer scales as it must and is never NaN or negative. */
 static void test_rmb_extremes(void **state)
@@ -553,6 +584,7 @@ int main(void)
 	        cmocka_unit_test(test_rmb_extremes),
 	        cmocka_unit_test(test_rmb_box_09),
 	        cmocka_unit_test(test_slivers_stay_finite),
+	        cmocka_unit_test(test_light_zero_link_bound),
 	        cmocka_unit_test(test_rmb_empty_hall),
 	        cmocka_unit_test(test_rmb_box_099),
 	        cmocka_unit_test(test_uniform_box_hr_09),
