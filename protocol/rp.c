@@ -8,7 +8,7 @@
  * const and built at compile time, so the library has no initialisation
  * and no state to share between threads.
  */
-#include "rp.h"
+#include "rp_int.h"
 
 #include <math.h>
 #include <stdarg.h>
@@ -168,30 +168,22 @@ json_t *rp_request(rp_cmd cmd, long long id)
 	return r;
 }
 
-static void set_err(rp_error *err, rp_err code, const char *msg)
-{
-	if (!err)
-		return;
-	err->code = code;
-	snprintf(err->msg, sizeof err->msg, "%s", msg);
-}
-
 rp_err rp_reply_status(const json_t *reply, rp_error *err)
 {
 	const json_t *ok, *e, *code, *msg;
 	rp_err c;
 
 	if (!json_is_object(reply)) {
-		set_err(err, RP_ERR_BAD_FRAME, "reply is not a JSON object");
+		rp_fail(err, RP_ERR_BAD_FRAME, "reply is not a JSON object");
 		return RP_ERR_BAD_FRAME;
 	}
 	ok = json_object_get(reply, "ok");
 	if (json_is_true(ok)) {
-		set_err(err, RP_ERR_OK, "");
+		rp_fail(err, RP_ERR_OK, "%s", "");
 		return RP_ERR_OK;
 	}
 	if (!json_is_false(ok)) {
-		set_err(err, RP_ERR_BAD_FRAME,
+		rp_fail(err, RP_ERR_BAD_FRAME,
 		        "reply has no boolean member 'ok'");
 		return RP_ERR_BAD_FRAME;
 	}
@@ -199,21 +191,21 @@ rp_err rp_reply_status(const json_t *reply, rp_error *err)
 	code = json_object_get(e, "code");
 	msg = json_object_get(e, "message");
 	if (!json_is_object(e) || !json_is_string(code)) {
-		set_err(err, RP_ERR_BAD_FRAME,
+		rp_fail(err, RP_ERR_BAD_FRAME,
 		        "error reply without an 'error' object holding a "
 		        "string 'code'");
 		return RP_ERR_BAD_FRAME;
 	}
 	c = rp_err_parse(json_string_value(code));
 	if (c == RP_ERR_OK) {
-		set_err(err, RP_ERR_BAD_FRAME,
+		rp_fail(err, RP_ERR_BAD_FRAME,
 		        "error reply with error code \"ok\"");
 		return RP_ERR_BAD_FRAME;
 	}
 	if (json_is_string(msg))
-		set_err(err, c, json_string_value(msg));
+		rp_fail(err, c, "%s", json_string_value(msg));
 	else
-		set_err(err, c, "(no message)");
+		rp_fail(err, c, "(no message)");
 	/* An unknown code maps to internal; keep the peer's name visible. */
 	if (err && c == RP_ERR_INTERNAL &&
 	    strcmp(json_string_value(code), "internal") != 0)
@@ -266,4 +258,40 @@ double rp_grid_spacing(double d_m)
 		return 10.0;
 	p = 0.2 * pow(5.0, log10(d_m));
 	return p > 10.0 ? 10.0 : p;
+}
+
+/* ---------------------------------------------------- internal helpers */
+
+void rp_fail(rp_error *err, rp_err code, const char *fmt, ...)
+{
+	va_list ap;
+
+	if (!err)
+		return;
+	err->code = code;
+	va_start(ap, fmt);
+	vsnprintf(err->msg, sizeof err->msg, fmt, ap);
+	va_end(ap);
+}
+
+const char *rp_json_kind(const json_t *v)
+{
+	switch (json_typeof(v)) {
+	case JSON_OBJECT:
+		return "an object";
+	case JSON_ARRAY:
+		return "an array";
+	case JSON_STRING:
+		return "a string";
+	case JSON_INTEGER:
+		return "an integer";
+	case JSON_REAL:
+		return "a real number";
+	case JSON_TRUE:
+	case JSON_FALSE:
+		return "a boolean";
+	case JSON_NULL:
+		return "null";
+	}
+	return "unknown";
 }

@@ -14,7 +14,7 @@
  * PORT is 0..65535 in decimal; 0 means "any" and only makes sense for a
  * listener.  A path must fit sun_path (at most 107 bytes).
  */
-#include "rp.h"
+#include "rp_int.h"
 
 #include <arpa/inet.h>
 #include <ctype.h>
@@ -23,21 +23,6 @@
 #include <string.h>
 #include <strings.h>
 
-static void addr_err(rp_error *err, const char *fmt, ...)
-        __attribute__((format(printf, 2, 3)));
-
-static void addr_err(rp_error *err, const char *fmt, ...)
-{
-	va_list ap;
-
-	if (!err)
-		return;
-	err->code = RP_ERR_BAD_REQUEST;
-	va_start(ap, fmt);
-	vsnprintf(err->msg, sizeof err->msg, fmt, ap);
-	va_end(ap);
-}
-
 static int parse_port(const char *s, const char *text, uint16_t *port,
                       rp_error *err)
 {
@@ -45,19 +30,19 @@ static int parse_port(const char *s, const char *text, uint16_t *port,
 	size_t n = strlen(s);
 
 	if (n == 0 || n > 5 || strspn(s, "0123456789") != n) {
-		addr_err(err,
-		         "address '%.200s': port '%.16s' is not a number "
-		         "0..65535",
-		         text, s);
+		rp_fail(err, RP_ERR_BAD_REQUEST,
+		        "address '%.200s': port '%.16s' is not a number "
+		        "0..65535",
+		        text, s);
 		return -1;
 	}
 	for (size_t i = 0; i < n; i++)
 		v = v * 10 + (unsigned long)(s[i] - '0');
 	if (v > 65535) {
-		addr_err(err,
-		         "address '%.200s': port %lu is out of range "
-		         "0..65535",
-		         text, v);
+		rp_fail(err, RP_ERR_BAD_REQUEST,
+		        "address '%.200s': port %lu is out of range "
+		        "0..65535",
+		        text, v);
 		return -1;
 	}
 	*port = (uint16_t)v;
@@ -70,12 +55,13 @@ static int check_host(const char *h, size_t n, int v6, const char *text,
                       rp_error *err)
 {
 	if (n == 0) {
-		addr_err(err, "address '%.200s': empty host", text);
+		rp_fail(err, RP_ERR_BAD_REQUEST, "address '%.200s': empty host",
+		        text);
 		return -1;
 	}
 	if (n > 255) {
-		addr_err(err, "address '%.60s...': host longer than 255 bytes",
-		         text);
+		rp_fail(err, RP_ERR_BAD_REQUEST,
+		        "address '%.60s...': host longer than 255 bytes", text);
 		return -1;
 	}
 	for (size_t i = 0; i < n; i++) {
@@ -83,10 +69,10 @@ static int check_host(const char *h, size_t n, int v6, const char *text,
 		if (isalnum(c) || c == '-' || c == '.' || c == '_' ||
 		    (v6 && (c == ':' || c == '%')))
 			continue;
-		addr_err(err,
-		         "address '%.200s': character '%c' not allowed in "
-		         "a host",
-		         text, isprint(c) ? c : '?');
+		rp_fail(err, RP_ERR_BAD_REQUEST,
+		        "address '%.200s': character '%c' not allowed in "
+		        "a host",
+		        text, isprint(c) ? c : '?');
 		return -1;
 	}
 	return 0;
@@ -98,14 +84,15 @@ static int parse_unix(const char *path, const char *text, rp_addr *out,
 	size_t n = strlen(path);
 
 	if (n == 0) {
-		addr_err(err, "address '%.200s': empty Unix socket path", text);
+		rp_fail(err, RP_ERR_BAD_REQUEST,
+		        "address '%.200s': empty Unix socket path", text);
 		return -1;
 	}
 	if (n >= sizeof out->path) {
-		addr_err(err,
-		         "Unix socket path of %zu bytes is too long (at "
-		         "most %zu): '%.60s...'",
-		         n, sizeof out->path - 1, path);
+		rp_fail(err, RP_ERR_BAD_REQUEST,
+		        "Unix socket path of %zu bytes is too long (at "
+		        "most %zu): '%.60s...'",
+		        n, sizeof out->path - 1, path);
 		return -1;
 	}
 	out->kind = RP_ADDR_UNIX;
@@ -123,8 +110,8 @@ static int parse_tcp(const char *s, const char *text, rp_addr *out,
 	if (*s == '[') {
 		const char *close = strchr(s, ']');
 		if (!close) {
-			addr_err(err, "address '%.200s': '[' without ']'",
-			         text);
+			rp_fail(err, RP_ERR_BAD_REQUEST,
+			        "address '%.200s': '[' without ']'", text);
 			return -1;
 		}
 		host = s + 1;
@@ -133,10 +120,10 @@ static int parse_tcp(const char *s, const char *text, rp_addr *out,
 		if (close[1] == ':')
 			port = close + 2;
 		else if (close[1] != '\0') {
-			addr_err(err,
-			         "address '%.200s': expected ':PORT' after "
-			         "']'",
-			         text);
+			rp_fail(err, RP_ERR_BAD_REQUEST,
+			        "address '%.200s': expected ':PORT' after "
+			        "']'",
+			        text);
 			return -1;
 		}
 	} else if ((colon = strchr(s, ':')) && strchr(colon + 1, ':')) {
@@ -165,7 +152,7 @@ int rp_addr_parse(const char *text, rp_addr *out, rp_error *err)
 
 	memset(&a, 0, sizeof a);
 	if (!text || !*text) {
-		addr_err(err, "empty address");
+		rp_fail(err, RP_ERR_BAD_REQUEST, "empty address");
 		return -1;
 	}
 	if (strncmp(text, "unix:", 5) == 0) {

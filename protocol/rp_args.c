@@ -7,7 +7,7 @@
  * member is omitted rather than null, and every refusal names the member
  * and what was expected ("'eps' must be a finite number, got a string").
  */
-#include "rp.h"
+#include "rp_int.h"
 
 #include <errno.h>
 #include <math.h>
@@ -15,43 +15,6 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-
-static void arg_err(rp_error *err, const char *fmt, ...)
-        __attribute__((format(printf, 2, 3)));
-
-static void arg_err(rp_error *err, const char *fmt, ...)
-{
-	va_list ap;
-
-	if (!err)
-		return;
-	err->code = RP_ERR_BAD_REQUEST;
-	va_start(ap, fmt);
-	vsnprintf(err->msg, sizeof err->msg, fmt, ap);
-	va_end(ap);
-}
-
-static const char *kind(const json_t *v)
-{
-	switch (json_typeof(v)) {
-	case JSON_OBJECT:
-		return "an object";
-	case JSON_ARRAY:
-		return "an array";
-	case JSON_STRING:
-		return "a string";
-	case JSON_INTEGER:
-		return "an integer";
-	case JSON_REAL:
-		return "a real number";
-	case JSON_TRUE:
-	case JSON_FALSE:
-		return "a boolean";
-	case JSON_NULL:
-		return "null";
-	}
-	return "unknown";
-}
 
 /*
  * Fetch obj[key]: returns the value, or NULL with *rc set to 1 (absent,
@@ -63,15 +26,16 @@ static json_t *lookup(const json_t *obj, const char *key, int required, int *rc,
 	json_t *v;
 
 	if (!json_is_object(obj)) {
-		arg_err(err, "request is not a JSON object (looking for '%s')",
-		        key);
+		rp_fail(err, RP_ERR_BAD_REQUEST,
+		        "request is not a JSON object (looking for '%s')", key);
 		*rc = -1;
 		return NULL;
 	}
 	v = json_object_get(obj, key);
 	if (!v) {
 		if (required)
-			arg_err(err, "missing required member '%s'", key);
+			rp_fail(err, RP_ERR_BAD_REQUEST,
+			        "missing required member '%s'", key);
 		*rc = required ? -1 : 1;
 	}
 	return v;
@@ -86,8 +50,10 @@ int rp_arg_u64(const json_t *obj, const char *key, int required, uint64_t *out,
 	if (!v)
 		return rc;
 	if (!json_is_integer(v) || json_integer_value(v) < 0) {
-		arg_err(err, "'%s' must be a non-negative integer, got %s", key,
-		        json_is_integer(v) ? "a negative integer" : kind(v));
+		rp_fail(err, RP_ERR_BAD_REQUEST,
+		        "'%s' must be a non-negative integer, got %s", key,
+		        json_is_integer(v) ? "a negative integer"
+		                           : rp_json_kind(v));
 		return -1;
 	}
 	*out = (uint64_t)json_integer_value(v);
@@ -103,8 +69,9 @@ int rp_arg_double(const json_t *obj, const char *key, int required, double *out,
 	if (!v)
 		return rc;
 	if (!json_is_number(v) || !isfinite(json_number_value(v))) {
-		arg_err(err, "'%s' must be a finite number, got %s", key,
-		        kind(v));
+		rp_fail(err, RP_ERR_BAD_REQUEST,
+		        "'%s' must be a finite number, got %s", key,
+		        rp_json_kind(v));
 		return -1;
 	}
 	*out = json_number_value(v);
@@ -120,8 +87,9 @@ int rp_arg_bool(const json_t *obj, const char *key, int required, int *out,
 	if (!v)
 		return rc;
 	if (!json_is_boolean(v)) {
-		arg_err(err, "'%s' must be true or false, got %s", key,
-		        kind(v));
+		rp_fail(err, RP_ERR_BAD_REQUEST,
+		        "'%s' must be true or false, got %s", key,
+		        rp_json_kind(v));
 		return -1;
 	}
 	*out = json_is_true(v);
@@ -137,7 +105,8 @@ int rp_arg_string(const json_t *obj, const char *key, int required,
 	if (!v)
 		return rc;
 	if (!json_is_string(v)) {
-		arg_err(err, "'%s' must be a string, got %s", key, kind(v));
+		rp_fail(err, RP_ERR_BAD_REQUEST,
+		        "'%s' must be a string, got %s", key, rp_json_kind(v));
 		return -1;
 	}
 	*out = json_string_value(v);
@@ -156,23 +125,23 @@ static int read_vec(const json_t *v, double *out, size_t n, const char *what,
 		snprintf(where, sizeof where, "'%s'[%zu]", what, index);
 	if (!json_is_array(v) || json_array_size(v) != n) {
 		if (json_is_array(v))
-			arg_err(err,
+			rp_fail(err, RP_ERR_BAD_REQUEST,
 			        "%s must be an array of %zu numbers, got %zu "
 			        "elements",
 			        where, n, json_array_size(v));
 		else
-			arg_err(err,
+			rp_fail(err, RP_ERR_BAD_REQUEST,
 			        "%s must be an array of %zu numbers, got %s",
-			        where, n, kind(v));
+			        where, n, rp_json_kind(v));
 		return -1;
 	}
 	for (size_t i = 0; i < n; i++) {
 		json_t *e = json_array_get(v, i);
 		if (!json_is_number(e) || !isfinite(json_number_value(e))) {
-			arg_err(err,
+			rp_fail(err, RP_ERR_BAD_REQUEST,
 			        "%s element %zu must be a finite number, "
 			        "got %s",
-			        where, i, kind(e));
+			        where, i, rp_json_kind(e));
 			return -1;
 		}
 		out[i] = json_number_value(e);
@@ -190,8 +159,9 @@ int rp_arg_vec(const json_t *obj, const char *key, int required, double *out,
 	if (!v)
 		return rc;
 	if (n == 0 || n > 16) {
-		arg_err(err, "'%s': vectors of %zu numbers are not supported",
-		        key, n);
+		rp_fail(err, RP_ERR_BAD_REQUEST,
+		        "'%s': vectors of %zu numbers are not supported", key,
+		        n);
 		return -1;
 	}
 	/* Leave the caller's default untouched when the vector is bad. */
@@ -215,19 +185,20 @@ int rp_arg_points(const json_t *obj, const char *key, size_t max_points,
 	if (!v)
 		return -1;
 	if (!json_is_array(v)) {
-		arg_err(err,
+		rp_fail(err, RP_ERR_BAD_REQUEST,
 		        "'%s' must be an array of [x,y,z,nx,ny,nz] arrays, "
 		        "got %s",
-		        key, kind(v));
+		        key, rp_json_kind(v));
 		return -1;
 	}
 	count = json_array_size(v);
 	if (count == 0) {
-		arg_err(err, "'%s' is empty: give at least one point", key);
+		rp_fail(err, RP_ERR_BAD_REQUEST,
+		        "'%s' is empty: give at least one point", key);
 		return -1;
 	}
 	if (count > max_points) {
-		arg_err(err,
+		rp_fail(err, RP_ERR_BAD_REQUEST,
 		        "'%s' holds %zu points, more than the limit of %zu",
 		        key, count, max_points);
 		return -1;
@@ -248,7 +219,8 @@ int rp_arg_points(const json_t *obj, const char *key, size_t max_points,
 			return -1;
 		}
 		if (q[3] == 0 && q[4] == 0 && q[5] == 0) {
-			arg_err(err, "'%s'[%zu] has a zero normal", key, i);
+			rp_fail(err, RP_ERR_BAD_REQUEST,
+			        "'%s'[%zu] has a zero normal", key, i);
 			free(p);
 			return -1;
 		}

@@ -17,7 +17,7 @@
  * size, before any payload byte is read.  After an error the stream is
  * out of step for good, which is why both errors close the connection.
  */
-#include "rp.h"
+#include "rp_int.h"
 
 #include <limits.h>
 #include <stdarg.h>
@@ -27,43 +27,6 @@
 
 /* json_int_t is long long in Debian's jansson (JSON_INTEGER_IS_LONG_LONG). */
 #define PAYLOAD_MAX ((size_t)LLONG_MAX)
-
-static void frame_err(rp_error *err, rp_err code, const char *fmt, ...)
-        __attribute__((format(printf, 3, 4)));
-
-static void frame_err(rp_error *err, rp_err code, const char *fmt, ...)
-{
-	va_list ap;
-
-	if (!err)
-		return;
-	err->code = code;
-	va_start(ap, fmt);
-	vsnprintf(err->msg, sizeof err->msg, fmt, ap);
-	va_end(ap);
-}
-
-static const char *json_kind(const json_t *v)
-{
-	switch (json_typeof(v)) {
-	case JSON_OBJECT:
-		return "an object";
-	case JSON_ARRAY:
-		return "an array";
-	case JSON_STRING:
-		return "a string";
-	case JSON_INTEGER:
-		return "an integer";
-	case JSON_REAL:
-		return "a real number";
-	case JSON_TRUE:
-	case JSON_FALSE:
-		return "a boolean";
-	case JSON_NULL:
-		return "null";
-	}
-	return "unknown";
-}
 
 /*
  * Parse the header line (without its newline) and read its "bytes".
@@ -81,14 +44,15 @@ static json_t *parse_header(const rp_limits *lim, const unsigned char *line,
 	h = json_loadb((const char *)line, line_len,
 	               JSON_DECODE_ANY | JSON_REJECT_DUPLICATES, &jerr);
 	if (!h) {
-		frame_err(err, RP_ERR_BAD_FRAME,
-		          "header is not valid JSON: %s (at byte %d)",
-		          jerr.text, jerr.position);
+		rp_fail(err, RP_ERR_BAD_FRAME,
+		        "header is not valid JSON: %s (at byte %d)", jerr.text,
+		        jerr.position);
 		return NULL;
 	}
 	if (!json_is_object(h)) {
-		frame_err(err, RP_ERR_BAD_FRAME,
-		          "header is %s, expected a JSON object", json_kind(h));
+		rp_fail(err, RP_ERR_BAD_FRAME,
+		        "header is %s, expected a JSON object",
+		        rp_json_kind(h));
 		json_decref(h);
 		return NULL;
 	}
@@ -98,17 +62,16 @@ static json_t *parse_header(const rp_limits *lim, const unsigned char *line,
 	if (!b)
 		return h;
 	if (!json_is_integer(b) || (v = json_integer_value(b)) < 0) {
-		frame_err(err, RP_ERR_BAD_FRAME,
-		          "header member \"bytes\" must be a non-negative "
-		          "integer, got %s",
-		          json_is_integer(b) ? "a negative integer"
-		                             : json_kind(b));
+		rp_fail(err, RP_ERR_BAD_FRAME,
+		        "header member \"bytes\" must be a non-negative "
+		        "integer, got %s",
+		        json_is_integer(b) ? "a negative integer"
+		                           : rp_json_kind(b));
 		json_decref(h);
 		return NULL;
 	}
 	if ((unsigned long long)v > lim->max_payload_bytes) {
-		frame_err(
-		        err, RP_ERR_TOO_LARGE,
+		rp_fail(err, RP_ERR_TOO_LARGE,
 		        "payload of %lld bytes exceeds the limit of %zu bytes",
 		        (long long)v, lim->max_payload_bytes);
 		json_decref(h);
@@ -141,10 +104,10 @@ rp_decode rp_frame_decode(const rp_limits *lim, const unsigned char *buf,
 	nl = scan ? memchr(buf, '\n', scan) : NULL;
 	if (!nl) {
 		if (len >= lim->max_header_bytes) {
-			frame_err(err, RP_ERR_TOO_LARGE,
-			          "header line longer than the limit of %zu "
-			          "bytes (no newline found)",
-			          lim->max_header_bytes);
+			rp_fail(err, RP_ERR_TOO_LARGE,
+			        "header line longer than the limit of %zu "
+			        "bytes (no newline found)",
+			        lim->max_header_bytes);
 			return RP_DECODE_ERROR;
 		}
 		return RP_DECODE_NEED;
