@@ -287,6 +287,21 @@ cmd_result srv_cmd_job_run(srv_req *r)
 
 /* ------------------------------------------------ pause, resume, cancel */
 
+/*
+ * A job on a worker is asked to stop (*req set, the engine's cancel flag
+ * raised); the reply waits until the worker has stopped it.  Called with
+ * j->mu held; releases it.
+ */
+static cmd_result stop_worker(srv_req *r, srv_job *j, int *req)
+{
+	*req = 1;
+	srv_job_raise_cancel_locked(j);
+	int rc = srv_job_add_waiter(j, r->c->id, r->id);
+	pthread_mutex_unlock(&j->mu);
+	return rc == 0 ? CMD_DEFERRED
+	               : srv_req_fail(r, RP_ERR_NOMEM, "out of memory");
+}
+
 cmd_result srv_cmd_job_pause(srv_req *r)
 {
 	int failed;
@@ -301,14 +316,8 @@ cmd_result srv_cmd_job_pause(srv_req *r)
 		                    (unsigned long long)j->id,
 		                    srv_job_state_name(st));
 	}
-	if (j->on_worker) { /* running: reply once it has stopped */
-		j->pause_req = 1;
-		srv_job_raise_cancel_locked(j);
-		int rc = srv_job_add_waiter(j, r->c->id, r->id);
-		pthread_mutex_unlock(&j->mu);
-		return rc == 0 ? CMD_DEFERRED
-		               : srv_req_fail(r, RP_ERR_NOMEM, "out of memory");
-	}
+	if (j->on_worker) /* running: reply once it has stopped */
+		return stop_worker(r, j, &j->pause_req);
 	if (st == SRV_JOB_QUEUED) {
 		j->state = SRV_JOB_PAUSED;
 		j->state_seq++;
@@ -360,14 +369,8 @@ cmd_result srv_cmd_job_cancel(srv_req *r)
 		                    (unsigned long long)j->id,
 		                    srv_job_state_name(st));
 	}
-	if (j->on_worker) {
-		j->cancel_req = 1;
-		srv_job_raise_cancel_locked(j);
-		int rc = srv_job_add_waiter(j, r->c->id, r->id);
-		pthread_mutex_unlock(&j->mu);
-		return rc == 0 ? CMD_DEFERRED
-		               : srv_req_fail(r, RP_ERR_NOMEM, "out of memory");
-	}
+	if (j->on_worker)
+		return stop_worker(r, j, &j->cancel_req);
 	j->state = SRV_JOB_CANCELLED;
 	j->state_seq++;
 	j->target.complete = 1;
