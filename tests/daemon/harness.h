@@ -239,6 +239,12 @@ double dm_num(const json_t *obj, const char *key);
 long long dm_int(const json_t *obj, const char *key);
 /* Member that must exist (borrowed). */
 json_t *dm_get(const json_t *obj, const char *key);
+/* obj must be an object holding every key of the NULL-ended list;
+ * failures name what (e.g. "status.memory") and the member. */
+void dm_require_keys(const json_t *obj, const char *what,
+                     const char *const *keys);
+/* The memory kinds PROTOCOL.md lists under memory.by_kind (NULL-ended). */
+extern const char *const dm_mem_kinds[];
 /* Compare two lux values within float rounding. */
 int dm_close_enough(double a, double b, double rel);
 

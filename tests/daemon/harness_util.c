@@ -258,6 +258,30 @@ long long dm_int(const json_t *obj, const char *key)
 	return (long long)json_integer_value(v);
 }
 
+void dm_require_keys(const json_t *obj, const char *what,
+                     const char *const *keys)
+{
+	if (!json_is_object(obj))
+		dm_fail("%s is not an object", what);
+	for (size_t i = 0; keys[i]; i++)
+		if (!json_object_get(obj, keys[i]))
+			dm_fail("%s: member \"%s\" missing", what, keys[i]);
+}
+
+const char *const dm_mem_kinds[] = {"geometry",
+                                    "materials",
+                                    "lights",
+                                    "names",
+                                    "bvh",
+                                    "elements_surface",
+                                    "elements_cluster",
+                                    "links",
+                                    "matrix",
+                                    "scratch",
+                                    "study",
+                                    "solution",
+                                    NULL};
+
 int dm_close_enough(double a, double b, double rel)
 {
 	double scale = fmax(fabs(a), fabs(b));

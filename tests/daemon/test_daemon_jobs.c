@@ -58,16 +58,6 @@ static const char *hall(char *buf, size_t len)
 
 /* ------------------------------------------------------------- stats */
 
-static void require_keys(const json_t *o, const char *what,
-                         const char *const *keys)
-{
-	if (!json_is_object(o))
-		fail_msg("%s is not an object", what);
-	for (size_t i = 0; keys[i]; i++)
-		if (!json_object_get(o, keys[i]))
-			fail_msg("%s: member \"%s\" missing", what, keys[i]);
-}
-
 /* Every member PROTOCOL.md lists for <stats>. */
 static void check_stats(const json_t *s)
 {
@@ -77,12 +67,12 @@ static void check_stats(const json_t *s)
 	        "clusters",  "leaves",      "refinements",
 	        "rays",      "residual",    "error_estimate",
 	        "converged", "memory",      NULL};
-	require_keys(s, "stats", top);
+	dm_require_keys(s, "stats", top);
 	static const char *const links[] = {
 	        "stored",   "ss",        "sc",      "cc",      "light",
 	        "active",   "passive",   "created", "deleted", "recreated",
 	        "gathered", "transient", "useful",  NULL};
-	require_keys(dm_get(s, "links"), "stats.links", links);
+	dm_require_keys(dm_get(s, "links"), "stats.links", links);
 	json_t *h = dm_get(s, "energy_hist");
 	if (!json_is_array(h) || json_array_size(h) != 16)
 		fail_msg("stats.energy_hist is not an array of 16");
@@ -91,21 +81,9 @@ static void check_stats(const json_t *s)
 	json_t *m = dm_get(s, "memory");
 	static const char *const mem[] = {"total_bytes", "peak_bytes",
 	                                  "peak_work_bytes", "by_kind", NULL};
-	require_keys(m, "stats.memory", mem);
-	static const char *const kinds[] = {"geometry",
-	                                    "materials",
-	                                    "lights",
-	                                    "names",
-	                                    "bvh",
-	                                    "elements_surface",
-	                                    "elements_cluster",
-	                                    "links",
-	                                    "matrix",
-	                                    "scratch",
-	                                    "study",
-	                                    "solution",
-	                                    NULL};
-	require_keys(dm_get(m, "by_kind"), "stats.memory.by_kind", kinds);
+	dm_require_keys(m, "stats.memory", mem);
+	dm_require_keys(dm_get(m, "by_kind"), "stats.memory.by_kind",
+	                dm_mem_kinds);
 	assert_true(dm_num(s, "seconds") >= 0);
 	assert_true(dm_num(s, "seconds_total") >= dm_num(s, "seconds"));
 	assert_true(dm_num(m, "peak_bytes") >= dm_num(m, "total_bytes"));
@@ -143,7 +121,7 @@ static void test_job_lifecycle_follows_the_protocol(void **state)
 	                                   "tol",
 	                                   "max_iterations",
 	                                   NULL};
-	require_keys(o, "job.create options", opts);
+	dm_require_keys(o, "job.create options", opts);
 	assert_true(dm_num(o, "tol") == 1e-3);
 	assert_int_equal(dm_int(o, "max_iterations"), 100);
 	assert_int_equal(dm_int(o, "threads"), 1);
@@ -222,7 +200,7 @@ static void test_job_lifecycle_follows_the_protocol(void **state)
 	static const char *const jl[] = {
 	        "id",        "name",     "scene", "solver",       "state",
 	        "iteration", "residual", "links", "memory_bytes", NULL};
-	require_keys(json_array_get(jobs, 0), "job.list entry", jl);
+	dm_require_keys(json_array_get(jobs, 0), "job.list entry", jl);
 	assert_true(json_equal(dm_get(json_array_get(jobs, 0), "id"), job));
 	json_decref(r);
 	json_decref(dm_ok(c, "{s:s, s:O}", "cmd", "job.delete", "job", job));

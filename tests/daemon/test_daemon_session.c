@@ -227,14 +227,6 @@ static void test_token_required_refuses_missing_and_wrong(void **state)
 	rmdir(tok);
 }
 
-static void check_keys(const json_t *o, const char *what,
-                       const char *const *keys)
-{
-	for (size_t i = 0; keys[i]; i++)
-		if (!json_object_get(o, keys[i]))
-			fail_msg("%s: member \"%s\" missing", what, keys[i]);
-}
-
 static void test_status_has_documented_members(void **state)
 {
 	(void)state;
@@ -246,36 +238,24 @@ static void test_status_has_documented_members(void **state)
 	static const char *const top[] = {"version",  "uptime_s", "connections",
 	                                  "jobs",     "memory",   "scenes",
 	                                  "job_list", "limits",   NULL};
-	check_keys(r, "status", top);
+	dm_require_keys(r, "status", top);
 	assert_int_equal(dm_int(r, "version"), 1);
 	assert_true(dm_int(r, "connections") >= 2);
 	assert_true(dm_num(r, "uptime_s") >= 0);
 	static const char *const states[] = {"queued", "running", "paused",
 	                                     "done",   "failed",  "cancelled",
 	                                     NULL};
-	check_keys(dm_get(r, "jobs"), "status.jobs", states);
+	dm_require_keys(dm_get(r, "jobs"), "status.jobs", states);
 	json_t *m = dm_get(r, "memory");
 	static const char *const mk[] = {"total_bytes", "by_kind",
 	                                 "scenes_bytes", "jobs_bytes", NULL};
-	check_keys(m, "status.memory", mk);
-	static const char *const kinds[] = {"geometry",
-	                                    "materials",
-	                                    "lights",
-	                                    "names",
-	                                    "bvh",
-	                                    "elements_surface",
-	                                    "elements_cluster",
-	                                    "links",
-	                                    "matrix",
-	                                    "scratch",
-	                                    "study",
-	                                    "solution",
-	                                    NULL};
-	check_keys(dm_get(m, "by_kind"), "status.memory.by_kind", kinds);
+	dm_require_keys(m, "status.memory", mk);
+	dm_require_keys(dm_get(m, "by_kind"), "status.memory.by_kind",
+	                dm_mem_kinds);
 	/* The report is the exact sum of its kinds. */
 	long long sum = 0;
-	for (size_t i = 0; kinds[i]; i++)
-		sum += dm_int(dm_get(m, "by_kind"), kinds[i]);
+	for (size_t i = 0; dm_mem_kinds[i]; i++)
+		sum += dm_int(dm_get(m, "by_kind"), dm_mem_kinds[i]);
 	assert_int_equal(sum, dm_int(m, "total_bytes"));
 	assert_int_equal(dm_int(m, "scenes_bytes") + dm_int(m, "jobs_bytes"),
 	                 dm_int(m, "total_bytes"));
@@ -463,23 +443,10 @@ static void test_metrics_serves_prometheus_text(void **state)
 	snprintf(series, sizeof(series), "luxradd_job_iteration{job=\"%lld\"}",
 	         (long long)json_integer_value(job));
 	assert_true(sample(body, series) == 1);
-	static const char *const kinds[] = {"geometry",
-	                                    "materials",
-	                                    "lights",
-	                                    "names",
-	                                    "bvh",
-	                                    "elements_surface",
-	                                    "elements_cluster",
-	                                    "links",
-	                                    "matrix",
-	                                    "scratch",
-	                                    "study",
-	                                    "solution",
-	                                    NULL};
 	double total = 0;
-	for (int k = 0; kinds[k]; k++) {
+	for (int k = 0; dm_mem_kinds[k]; k++) {
 		snprintf(series, sizeof(series),
-		         "luxradd_memory_bytes{kind=\"%s\"}", kinds[k]);
+		         "luxradd_memory_bytes{kind=\"%s\"}", dm_mem_kinds[k]);
 		total += sample(body, series);
 	}
 	assert_true(total ==
