@@ -38,39 +38,9 @@ cleanup() {
 }
 trap cleanup EXIT
 unset LUXRAD_CONNECT LUXRAD_TOKEN LUXRAD_TOKEN_FILE
-FAILS=0
-PASSES=0
-
-pass() {
-	PASSES=$((PASSES + 1))
-	echo "ok - $1"
-}
-
-fail() {
-	FAILS=$((FAILS + 1))
-	echo "not ok - $1"
-	if [[ -s $TMP/err ]]; then
-		sed 's/^/#   stderr: /' "$TMP/err" | head -n 20
-	fi
-}
-
-# run ARGS...: run luxrad, stdout to $TMP/out, stderr to $TMP/err; sets RC.
-run() {
-	"$LUXRAD" "$@" >"$TMP/out" 2>"$TMP/err" </dev/null
-	RC=$?
-}
-
-# expect_exit NAME CODE [STDERR-SUBSTRING]: check the last run.
-expect_exit() {
-	local name=$1 code=$2 needle=${3:-}
-	if [[ $RC -ne $code ]]; then
-		fail "$name: exit $RC, expected $code"
-	elif [[ -n $needle ]] && ! grep -qF -- "$needle" "$TMP/err"; then
-		fail "$name: stderr does not mention '$needle'"
-	else
-		pass "$name"
-	fi
-}
+PROGRAM="$LUXRAD"
+# shellcheck source=tap.sh
+source "$(dirname "$0")/tap.sh"
 
 # expect_out NAME SUBSTRING: the last run's stdout contains SUBSTRING.
 expect_out() {
