@@ -175,6 +175,14 @@ int lx_pos_id(const lx_ctx *cx, int i, const char *what, long long *out);
 void lx_print_json(const json_t *v);
 /* Human-readable bytes ("70.5 KiB"). */
 const char *lx_fmt_bytes(double bytes, char *buf, size_t len);
+/* Reply members: integer (0 when absent), number (0), string ("?"); a
+ * number formatted with fmt or as bytes, "?" when absent or null. */
+long long lx_jint(const json_t *o, const char *k);
+double lx_jdbl(const json_t *o, const char *k);
+const char *lx_jstr(const json_t *o, const char *k);
+const char *lx_jnum(const json_t *o, const char *k, const char *fmt, char *buf,
+                    size_t len);
+const char *lx_jbytes(const json_t *o, const char *k, char *buf, size_t len);
 
 /* ------------------------------------------------------------- commands */
 

@@ -22,38 +22,6 @@
 
 /* ------------------------------------------------------- reply helpers */
 
-static long long jint(const json_t *o, const char *k)
-{
-	return (long long)json_integer_value(json_object_get(o, k));
-}
-
-static const char *jstr(const json_t *o, const char *k)
-{
-	const char *s = json_string_value(json_object_get(o, k));
-	return s ? s : "?";
-}
-
-/* A number as text ("?" when absent or null). */
-static const char *jnum(const json_t *o, const char *k, const char *fmt,
-                        char *buf, size_t len)
-{
-	json_t *v = json_object_get(o, k);
-
-	if (!json_is_number(v))
-		return "?";
-	snprintf(buf, len, fmt, json_number_value(v));
-	return buf;
-}
-
-static const char *jbytes(const json_t *o, const char *k, char *buf, size_t len)
-{
-	json_t *v = json_object_get(o, k);
-
-	if (!json_is_number(v))
-		return "?";
-	return lx_fmt_bytes(json_number_value(v), buf, len);
-}
-
 /* A request naming one object: {"cmd": name, key: id}. */
 static json_t *req_id(rp_cmd cmd, const char *key, long long id)
 {
@@ -201,7 +169,7 @@ static int upload(lx_ctx *cx, const unsigned char *data, size_t len,
 	rc = lx_request(cx, req, data, len, &reply, NULL, NULL, NULL, NULL);
 	json_decref(req);
 	if (rc == LX_EXIT_OK) {
-		*scene = jint(reply, "scene");
+		*scene = lx_jint(reply, "scene");
 		if (cx->json)
 			lx_print_json(reply);
 		warn = json_string_value(json_object_get(reply, "warnings"));
@@ -220,7 +188,7 @@ static int create_and_run(lx_ctx *cx, json_t *create, long long *job)
 	int rc = lx_call(cx, create, &reply);
 
 	if (rc == LX_EXIT_OK) {
-		*job = jint(reply, "job");
+		*job = lx_jint(reply, "job");
 		if (cx->json)
 			lx_print_json(reply);
 		json_decref(reply);
@@ -308,9 +276,10 @@ int lx_cmd_scenes(lx_ctx *cx)
 			                 json_object_get(s, "created")),
 			         when, sizeof when);
 			printf("%-5lld %-24.24s %12lld %9lld %5lld %11s  %s\n",
-			       jint(s, "id"), jstr(s, "name"), jint(s, "bytes"),
-			       jint(s, "polygons"), jint(s, "jobs"),
-			       jbytes(s, "memory_bytes", mem, sizeof mem),
+			       lx_jint(s, "id"), lx_jstr(s, "name"),
+			       lx_jint(s, "bytes"), lx_jint(s, "polygons"),
+			       lx_jint(s, "jobs"),
+			       lx_jbytes(s, "memory_bytes", mem, sizeof mem),
 			       when);
 		}
 	}
@@ -335,12 +304,12 @@ int lx_cmd_jobs(lx_ctx *cx)
 			printf("%-5lld %-20.20s %5lld %-11s %-9s %6lld %10s "
 			       "%10lld "
 			       "%11s\n",
-			       jint(j, "id"), jstr(j, "name"), jint(j, "scene"),
-			       jstr(j, "solver"), jstr(j, "state"),
-			       jint(j, "iteration"),
-			       jnum(j, "residual", "%.3g", res, sizeof res),
-			       jint(j, "links"),
-			       jbytes(j, "memory_bytes", mem, sizeof mem));
+			       lx_jint(j, "id"), lx_jstr(j, "name"),
+			       lx_jint(j, "scene"), lx_jstr(j, "solver"),
+			       lx_jstr(j, "state"), lx_jint(j, "iteration"),
+			       lx_jnum(j, "residual", "%.3g", res, sizeof res),
+			       lx_jint(j, "links"),
+			       lx_jbytes(j, "memory_bytes", mem, sizeof mem));
 		}
 	}
 	json_decref(reply);
@@ -365,7 +334,7 @@ int lx_cmd_create(lx_ctx *cx)
 		                    json_string(cx->val[LX_OPT_NAME]));
 	rc = simple_call(cx, req, &reply);
 	if (rc == LX_EXIT_OK && !cx->json)
-		printf("%lld\n", jint(reply, "job"));
+		printf("%lld\n", lx_jint(reply, "job"));
 	json_decref(reply);
 	return rc;
 }
@@ -384,12 +353,12 @@ static void run_event(void *ud, json_t *ev)
 {
 	run_watch *w = ud;
 
-	if (jint(ev, "job") != w->job)
+	if (lx_jint(ev, "job") != w->job)
 		return;
 	if (w->cx->json)
 		json_array_append(w->early, ev);
-	if (!strcmp(jstr(ev, "event"), "state"))
-		snprintf(w->state, sizeof w->state, "%s", jstr(ev, "state"));
+	if (!strcmp(lx_jstr(ev, "event"), "state"))
+		snprintf(w->state, sizeof w->state, "%s", lx_jstr(ev, "state"));
 }
 
 /* The run request: exactly one target, checked locally. */
@@ -442,11 +411,11 @@ static void print_outcome(lx_ctx *cx, long long job, const char *state)
 	j = json_object_get(reply, "job");
 	st = json_object_get(j, "stats");
 	printf("job %lld: %s (iteration %lld, error estimate %s, %s s)\n", job,
-	       state, jint(j, "iteration"),
-	       jnum(st, "error_estimate", "%.3g", a, sizeof a),
-	       jnum(st, "seconds_total", "%.2f", b, sizeof b));
+	       state, lx_jint(j, "iteration"),
+	       lx_jnum(st, "error_estimate", "%.3g", a, sizeof a),
+	       lx_jnum(st, "seconds_total", "%.2f", b, sizeof b));
 	if (json_is_string(json_object_get(j, "error")))
-		printf("error: %s\n", jstr(j, "error"));
+		printf("error: %s\n", lx_jstr(j, "error"));
 	json_decref(reply);
 }
 
@@ -484,7 +453,7 @@ int lx_cmd_run(lx_ctx *cx)
 		json_array_foreach(w.early, i, ev) lx_print_json(ev);
 		/* A state event seen meanwhile is newer than the reply. */
 		snprintf(state, sizeof state, "%s",
-		         w.state[0] ? w.state : jstr(reply, "state"));
+		         w.state[0] ? w.state : lx_jstr(reply, "state"));
 		if (!cx->given[LX_OPT_WAIT] && !cx->json)
 			printf("job %lld: %s\n", w.job, state);
 	}
@@ -514,7 +483,7 @@ int lx_cmd_control(lx_ctx *cx)
 		return LX_EXIT_USAGE;
 	rc = simple_call(cx, req_id(cmd, "job", job), &reply);
 	if (rc == LX_EXIT_OK && !cx->json)
-		printf("job %lld: %s\n", job, jstr(reply, "state"));
+		printf("job %lld: %s\n", job, lx_jstr(reply, "state"));
 	json_decref(reply);
 	return rc;
 }

@@ -22,16 +22,6 @@
 
 #include "client.h"
 
-static long long jint(const json_t *o, const char *k)
-{
-	return (long long)json_integer_value(json_object_get(o, k));
-}
-
-static double jdbl(const json_t *o, const char *k)
-{
-	return json_number_value(json_object_get(o, k));
-}
-
 /* ---------------------------------------------------------- points file */
 
 int lx_points_load(const char *path, json_t **points, size_t *n)
@@ -224,7 +214,7 @@ static json_t *grid_request(lx_ctx *cx, long long job)
 /* The grid as CSV rows (points from the reply), its summary on stderr. */
 static void print_grid(const json_t *reply)
 {
-	long long nu = jint(reply, "nu"), nv = jint(reply, "nv");
+	long long nu = lx_jint(reply, "nu"), nv = lx_jint(reply, "nv");
 	json_t *lux = json_object_get(reply, "lux");
 	json_t *pts = json_object_get(reply, "points");
 	char u0[32] = "-"; /* null when the mean is 0 */
@@ -242,13 +232,13 @@ static void print_grid(const json_t *reply)
 		}
 	}
 	if (json_is_number(json_object_get(reply, "u0")))
-		snprintf(u0, sizeof u0, "%.3f", jdbl(reply, "u0"));
+		snprintf(u0, sizeof u0, "%.3f", lx_jdbl(reply, "u0"));
 	fprintf(stderr, "grid %lld x %lld, spacing %.4g m: ", nu, nv,
-	        jdbl(reply, "spacing"));
+	        lx_jdbl(reply, "spacing"));
 	fprintf(stderr, "min %.4g, mean %.4g, max %.4g lux, U0 %s ",
-	        jdbl(reply, "min"), jdbl(reply, "mean"), jdbl(reply, "max"),
-	        u0);
-	fprintf(stderr, "(iteration %lld)\n", jint(reply, "iteration"));
+	        lx_jdbl(reply, "min"), lx_jdbl(reply, "mean"),
+	        lx_jdbl(reply, "max"), u0);
+	fprintf(stderr, "(iteration %lld)\n", lx_jint(reply, "iteration"));
 }
 
 static int query_grid(lx_ctx *cx, long long job)
@@ -306,10 +296,11 @@ static int query_surfaces(lx_ctx *cx, long long job)
 		{
 			const char *name =
 			        json_string_value(json_object_get(s, "name"));
-			printf("%lld,", jint(s, "node"));
+			printf("%lld,", lx_jint(s, "node"));
 			csv_field(name ? name : "");
-			printf(",%.6g,%.6g,%.6g,%.6g\n", jdbl(s, "area"),
-			       jdbl(s, "min"), jdbl(s, "mean"), jdbl(s, "max"));
+			printf(",%.6g,%.6g,%.6g,%.6g\n", lx_jdbl(s, "area"),
+			       lx_jdbl(s, "min"), lx_jdbl(s, "mean"),
+			       lx_jdbl(s, "max"));
 		}
 	}
 	json_decref(reply);
@@ -429,8 +420,9 @@ int lx_cmd_export(lx_ctx *cx)
 	else
 		printf("wrote %s: %zu bytes, %lld vertices, %lld triangles "
 		       "(job %lld, iteration %lld)\n",
-		       path, glb_len, jint(reply, "vertices"),
-		       jint(reply, "triangles"), job, jint(reply, "iteration"));
+		       path, glb_len, lx_jint(reply, "vertices"),
+		       lx_jint(reply, "triangles"), job,
+		       lx_jint(reply, "iteration"));
 	json_decref(reply);
 	return rc;
 }

@@ -11,17 +11,6 @@
 
 #include "client.h"
 
-static long long jint(const json_t *o, const char *k)
-{
-	return (long long)json_integer_value(json_object_get(o, k));
-}
-
-static const char *jstr(const json_t *o, const char *k)
-{
-	const char *s = json_string_value(json_object_get(o, k));
-	return s ? s : "?";
-}
-
 /* Any scalar as short text. */
 static const char *scalar(const json_t *v, char *buf, size_t len)
 {
@@ -41,25 +30,6 @@ static const char *scalar(const json_t *v, char *buf, size_t len)
 	default:
 		return "?";
 	}
-}
-
-static const char *num(const json_t *o, const char *k, const char *fmt,
-                       char *buf, size_t len)
-{
-	json_t *v = json_object_get(o, k);
-
-	if (!json_is_number(v))
-		return "?";
-	snprintf(buf, len, fmt, json_number_value(v));
-	return buf;
-}
-
-static const char *bytes(const json_t *o, const char *k, char *buf, size_t len)
-{
-	json_t *v = json_object_get(o, k);
-
-	return json_is_number(v) ? lx_fmt_bytes(json_number_value(v), buf, len)
-	                         : "?";
 }
 
 /* "key=value key=value ..." of an object's scalars, wrapped. */
@@ -93,14 +63,14 @@ static void print_pairs(const char *title, const json_t *obj, int skip_zero)
 
 static void print_target(const json_t *t)
 {
-	const char *mode = jstr(t, "mode");
+	const char *mode = lx_jstr(t, "mode");
 	char buf[32];
 
 	if (!strcmp(mode, "iterations"))
-		printf(", target %lld iterations", jint(t, "n"));
+		printf(", target %lld iterations", lx_jint(t, "n"));
 	else if (!strcmp(mode, "seconds"))
 		printf(", target %s s",
-		       num(t, "seconds", "%g", buf, sizeof buf));
+		       lx_jnum(t, "seconds", "%g", buf, sizeof buf));
 	else if (strcmp(mode, "?"))
 		printf(", target %s", mode);
 }
@@ -117,17 +87,18 @@ static void print_stats(const json_t *st)
 	}
 	printf("iteration %lld: links %lld, elements %lld, leaves %lld, "
 	       "clusters %lld\n",
-	       jint(st, "iteration"), jint(links, "stored"),
-	       jint(st, "elements"), jint(st, "leaves"), jint(st, "clusters"));
+	       lx_jint(st, "iteration"), lx_jint(links, "stored"),
+	       lx_jint(st, "elements"), lx_jint(st, "leaves"),
+	       lx_jint(st, "clusters"));
 	printf("residual %s, error estimate %s, converged %s\n",
-	       num(st, "residual", "%.3g", a, sizeof a),
-	       num(st, "error_estimate", "%.3g", b, sizeof b),
+	       lx_jnum(st, "residual", "%.3g", a, sizeof a),
+	       lx_jnum(st, "error_estimate", "%.3g", b, sizeof b),
 	       json_is_true(json_object_get(st, "converged")) ? "yes" : "no");
 	printf("time %s s (last iteration %s s), memory %s (peak %s)\n",
-	       num(st, "seconds_total", "%.3f", a, sizeof a),
-	       num(st, "seconds", "%.3f", b, sizeof b),
-	       bytes(mem, "total_bytes", c, sizeof c),
-	       bytes(mem, "peak_bytes", d, sizeof d));
+	       lx_jnum(st, "seconds_total", "%.3f", a, sizeof a),
+	       lx_jnum(st, "seconds", "%.3f", b, sizeof b),
+	       lx_jbytes(mem, "total_bytes", c, sizeof c),
+	       lx_jbytes(mem, "peak_bytes", d, sizeof d));
 }
 
 int lx_cmd_info(lx_ctx *cx)
@@ -151,19 +122,19 @@ int lx_cmd_info(lx_ctx *cx)
 		return rc;
 	}
 	j = json_object_get(reply, "job");
-	printf("job %lld \"%s\" on scene %lld, solver %s\n", jint(j, "id"),
-	       jstr(j, "name"), jint(j, "scene"), jstr(j, "solver"));
-	printf("state %s, iteration %lld", jstr(j, "state"),
-	       jint(j, "iteration"));
+	printf("job %lld \"%s\" on scene %lld, solver %s\n", lx_jint(j, "id"),
+	       lx_jstr(j, "name"), lx_jint(j, "scene"), lx_jstr(j, "solver"));
+	printf("state %s, iteration %lld", lx_jstr(j, "state"),
+	       lx_jint(j, "iteration"));
 	print_target(json_object_get(j, "target"));
 	printf("\n");
 	if (json_is_string(json_object_get(j, "error")))
-		printf("error: %s\n", jstr(j, "error"));
+		printf("error: %s\n", lx_jstr(j, "error"));
 	print_pairs("options:", json_object_get(j, "options"), 0);
 	print_stats(json_object_get(j, "stats"));
 	printf("created %s, updated %s (Unix time)\n",
-	       num(j, "created", "%.0f", a, sizeof a),
-	       num(j, "updated", "%.0f", b, sizeof b));
+	       lx_jnum(j, "created", "%.0f", a, sizeof a),
+	       lx_jnum(j, "updated", "%.0f", b, sizeof b));
 	json_decref(reply);
 	return LX_EXIT_OK;
 }
@@ -199,31 +170,32 @@ int lx_cmd_status(lx_ctx *cx)
 		json_decref(reply);
 		return rc;
 	}
-	printf("%s (protocol %lld) at %s, up ", jstr(cx->conn.hello, "server"),
-	       jint(reply, "version"), cx->conn.where);
+	printf("%s (protocol %lld) at %s, up ",
+	       lx_jstr(cx->conn.hello, "server"), lx_jint(reply, "version"),
+	       cx->conn.where);
 	print_uptime(json_number_value(json_object_get(reply, "uptime_s")));
-	printf(", %lld connection(s)\n", jint(reply, "connections"));
+	printf(", %lld connection(s)\n", lx_jint(reply, "connections"));
 	print_pairs("jobs:", json_object_get(reply, "jobs"), 0);
 	mem = json_object_get(reply, "memory");
 	printf("memory: %s (scenes %s, jobs %s)\n",
-	       bytes(mem, "total_bytes", a, sizeof a),
-	       bytes(mem, "scenes_bytes", b, sizeof b),
-	       bytes(mem, "jobs_bytes", c, sizeof c));
+	       lx_jbytes(mem, "total_bytes", a, sizeof a),
+	       lx_jbytes(mem, "scenes_bytes", b, sizeof b),
+	       lx_jbytes(mem, "jobs_bytes", c, sizeof c));
 	print_pairs("  by kind:", json_object_get(mem, "by_kind"), 1);
-	json_array_foreach(json_object_get(reply, "scenes"), i, v)
-	        printf("scene %lld \"%s\": %s\n", jint(v, "id"),
-	               jstr(v, "name"), bytes(v, "memory_bytes", a, sizeof a));
-	json_array_foreach(json_object_get(reply, "job_list"), i, v)
-	        printf("job %lld (%s): %s\n", jint(v, "id"), jstr(v, "state"),
-	               bytes(v, "memory_bytes", a, sizeof a));
+	json_array_foreach(json_object_get(reply, "scenes"), i, v) printf(
+	        "scene %lld \"%s\": %s\n", lx_jint(v, "id"), lx_jstr(v, "name"),
+	        lx_jbytes(v, "memory_bytes", a, sizeof a));
+	json_array_foreach(json_object_get(reply, "job_list"), i, v) printf(
+	        "job %lld (%s): %s\n", lx_jint(v, "id"), lx_jstr(v, "state"),
+	        lx_jbytes(v, "memory_bytes", a, sizeof a));
 	v = json_object_get(reply, "modbus");
 	if (json_is_object(v)) {
 		if (json_is_integer(json_object_get(v, "port")))
 			printf("modbus: %s on port %lld, %lld client(s)\n",
-			       jstr(v, "state"), jint(v, "port"),
-			       jint(v, "clients"));
+			       lx_jstr(v, "state"), lx_jint(v, "port"),
+			       lx_jint(v, "clients"));
 		else
-			printf("modbus: %s\n", jstr(v, "state"));
+			printf("modbus: %s\n", lx_jstr(v, "state"));
 	}
 	json_decref(reply);
 	return LX_EXIT_OK;

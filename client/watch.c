@@ -18,22 +18,6 @@
 
 #define BAR_WIDTH 30
 
-static long long jint(const json_t *o, const char *k)
-{
-	return (long long)json_integer_value(json_object_get(o, k));
-}
-
-static double jdbl(const json_t *o, const char *k)
-{
-	return json_number_value(json_object_get(o, k));
-}
-
-static const char *jstr(const json_t *o, const char *k)
-{
-	const char *s = json_string_value(json_object_get(o, k));
-	return s ? s : "?";
-}
-
 int lx_state_exit(const char *state)
 {
 	return !strcmp(state, "failed") || !strcmp(state, "cancelled")
@@ -57,7 +41,7 @@ static void clear_bar(FILE *live, int *bar)
 
 static void draw_progress(FILE *live, const json_t *ev, int *bar)
 {
-	double f = jdbl(ev, "fraction");
+	double f = lx_jdbl(ev, "fraction");
 	char cells[BAR_WIDTH + 1];
 	int full;
 
@@ -70,7 +54,8 @@ static void draw_progress(FILE *live, const json_t *ev, int *bar)
 	memset(cells + full, '.', (size_t)(BAR_WIDTH - full));
 	cells[BAR_WIDTH] = '\0';
 	fprintf(live, "\riteration %lld [%s] %3.0f%% %7.1f s",
-	        jint(ev, "iteration"), cells, 100 * f, jdbl(ev, "elapsed_s"));
+	        lx_jint(ev, "iteration"), cells, 100 * f,
+	        lx_jdbl(ev, "elapsed_s"));
 	fflush(live);
 	*bar = 1;
 }
@@ -85,15 +70,15 @@ static void draw_iteration(FILE *live, const json_t *ev, int *bar)
 	fprintf(live,
 	        "it %4lld  links %9lld  leaves %8lld  mem %10s  residual "
 	        "%9.3g  err %9.3g  %8.2f s",
-	        jint(st, "iteration"),
-	        jint(json_object_get(st, "links"), "stored"),
-	        jint(st, "leaves"),
-	        lx_fmt_bytes(jdbl(mem, "total_bytes"), m, sizeof m),
-	        jdbl(st, "residual"), jdbl(st, "error_estimate"),
-	        jdbl(st, "seconds"));
-	if (jint(ev, "dropped_progress") > 0)
+	        lx_jint(st, "iteration"),
+	        lx_jint(json_object_get(st, "links"), "stored"),
+	        lx_jint(st, "leaves"),
+	        lx_fmt_bytes(lx_jdbl(mem, "total_bytes"), m, sizeof m),
+	        lx_jdbl(st, "residual"), lx_jdbl(st, "error_estimate"),
+	        lx_jdbl(st, "seconds"));
+	if (lx_jint(ev, "dropped_progress") > 0)
 		fprintf(live, "  (%lld progress events dropped)",
-		        jint(ev, "dropped_progress"));
+		        lx_jint(ev, "dropped_progress"));
 	fputc('\n', live);
 	fflush(live);
 }
@@ -109,15 +94,15 @@ int lx_follow_job(lx_ctx *cx, long long job, const char *state, FILE *live,
 		json_t *ev;
 		if ((rc = lx_next_event(cx, &ev)) != LX_EXIT_OK)
 			break;
-		if (jint(ev, "job") != job) {
+		if (lx_jint(ev, "job") != job) {
 			json_decref(ev);
 			continue;
 		}
-		const char *kind = jstr(ev, "event");
+		const char *kind = lx_jstr(ev, "event");
 		if (json_lines)
 			lx_print_json(ev);
 		if (!strcmp(kind, "state")) {
-			snprintf(cur, sizeof cur, "%s", jstr(ev, "state"));
+			snprintf(cur, sizeof cur, "%s", lx_jstr(ev, "state"));
 			if (live && active(cur)) { /* the final: caller's */
 				clear_bar(live, &bar);
 				fprintf(live, "job %lld: %s\n", job, cur);
@@ -152,12 +137,12 @@ int lx_cmd_watch(lx_ctx *cx)
 		json_decref(reply);
 		return rc;
 	}
-	snprintf(state, sizeof state, "%s", jstr(reply, "state"));
+	snprintf(state, sizeof state, "%s", lx_jstr(reply, "state"));
 	if (cx->json)
 		lx_print_json(reply);
 	else if (tty)
 		printf("job %lld: %s (iteration %lld)\n", job, state,
-		       jint(reply, "iteration"));
+		       lx_jint(reply, "iteration"));
 	json_decref(reply);
 	/* On a terminal each state change is a line of its own. */
 	rc = lx_follow_job(cx, job, state, tty ? stdout : NULL, !tty, state,
