@@ -161,7 +161,9 @@ static uint8_t evaluate(rad_solver *sv, uint32_t r, uint32_t s, float *ff,
 	 * little even at its bound (box gap), keep it as a zero link that
 	 * later iterations re-test on that bound (see retest_list); else
 	 * look closer now.  Between
-	 * surfaces the samples cover both ends and zero means zero. */
+	 * surfaces the samples cover both ends, and an all-blocked answer
+	 * has already been re-checked with other points
+	 * (rad_ff_patch_spread): zero means zero. */
 	if (!(f > 0) && (node_is_cluster(r) || node_is_cluster(s))) {
 		if (may_split &&
 		    oracle(sv, r, s, node_ff_bound(h, r, s)) > sv->opt.eps)
