@@ -117,6 +117,7 @@ typedef struct rmb_state {
 	uint32_t iter;   /* iterations done */
 	int force_store; /* cancelled: keep pairs at their level */
 	double mean_dB;  /* area-mean photopic dB after the last update */
+	double mean_B;   /* ... and B */
 	rmb_set deleted; /* study: pairs deleted so far */
 	/* Receiver accuracy (see rcv_too_coarse), by element id:
 	 * cut   links at least this error (a fraction of the limit) go to
@@ -314,12 +315,29 @@ static double node_rho_max(const rad_solver *sv, uint32_t t)
 	return elem_rho_max(sv, t);
 }
 
+/*
+ * The receiver-accuracy budget of an iteration: variation times the mean
+ * radiosity it transmits (in the first, the sources' mean exitance), but
+ * never below variation x (1 - rho_max) x the mean radiosity B reached.
+ * Against the increment alone the budget shrank with it, and the late
+ * increments -- by then a fraction of a percent of the answer -- were
+ * resolved as finely as the first bounce (measured on the Cornell box
+ * converged to 1e-3 at eps 1e-4: elements 6,669 -> 111,789 over
+ * iterations 5-9, 2.6 s, for a grid error of 2.69 % against 2.66 % with
+ * the floor, in 0.13 s and 3,153 elements).  The energy bound keeps each
+ * increment's power within rho_max of the last, so once the mean
+ * increment is under (1 - rho_max) mean B, everything still to come adds
+ * up to less than the answer already has: from there an increment is
+ * resolved against that share of the answer, no finer.
+ */
 static double spread_limit(const rad_solver *sv)
 {
 	const rmb_state *st = sv->impl;
-	double ref = st->iter == 0 ? sv->flux_scale / sv->scene->total_area
-	                           : st->mean_dB;
-	return sv->opt.variation * ref;
+	if (st->iter == 0)
+		return sv->opt.variation * sv->flux_scale /
+		       sv->scene->total_area;
+	double floor = (1 - st->rhomax[0]) * st->mean_B;
+	return sv->opt.variation * fmax(st->mean_dB, floor);
 }
 
 /*
@@ -1168,6 +1186,7 @@ static rad_status rmb_step(rad_solver *sv, rad_error *err)
 	rad_hier_pull(h);
 	st->iter++;
 	st->mean_dB = acc.change / sv->scene->total_area;
+	st->mean_B = acc.total / sv->scene->total_area;
 	double r = acc.total > 0 ? acc.change / acc.total : 0;
 	rad_solver_set_residual(sv, r);
 	count_links(sv);
