@@ -59,11 +59,22 @@ if trade:
               "peak MB | grid error vs reference |")
     md.append("|---|---|---|---|---|---|---|---|")
     for t in trade:
+        its = t["iterations"] + ("" if t["converged"] == "1" else " (cap)")
         md.append("| %s | %s | %s | %s | %.2f | %s | %.1f | %.2f %% |" % (
-            t["scene"], t["solver"], t["eps"], t["iterations"],
+            t["scene"], t["solver"], t["eps"], its,
             float(t["seconds"]), t["links"], int(t["peak_bytes"]) / 1e6,
             100 * float(t["grid_rms_rel"])))
     md.append("")
+    if any(t["converged"] != "1" for t in trade):
+        md.append("Rows marked (cap) stopped at the iteration cap "
+                  "(`luxrad-study --max-iterations`) before their error "
+                  "estimate reached the tolerance: their error includes "
+                  "energy not yet transported.  For progressive the eps "
+                  "column names the rung; its knob is the mesh edge (0.1, "
+                  "0.07, 0.05, 0.035, 0.025 of the scene diagonal), and a "
+                  "finer mesh needs more shots, so at a fixed cap its "
+                  "error grows down the ladder.")
+        md.append("")
 
 
 def series(scene, solver, col):
