@@ -17,7 +17,8 @@
  *   write_addr_file       "modbus HOST:PORT" line (srv_mb_addr_text)
  *   srv_run's timer       srv_mb_tick: daemon block, once a second
  *   create_done           srv_mb_job_added
- *   srv_recover           srv_mb_recovered (restored jobs, id order)
+ *   srv_recover           srv_mb_sensors_restore, then srv_mb_recovered
+ *                         (restored jobs, id order)
  *   srv_publish_event     srv_mb_job_event (state, iteration, progress)
  *   srv_publish_state_now srv_mb_job_event (I/O-thread state changes)
  *   srv_publish_job_gone  srv_mb_job_gone (job.delete)
@@ -28,9 +29,10 @@
  * query.points makes, with the same 6 doubles per point -- on the query
  * pool; the result is published on the I/O thread, per sensor only when
  * its iteration is newer than the one published (two evaluations may
- * finish out of order).  Sensors added with sensor.add live in memory:
- * they are not persisted, a restart forgets them (the scene's come back
- * from the stored scene bytes).
+ * finish out of order).  Sensors added with sensor.add are recorded in
+ * the store (on the store thread, before the reply) and come back with
+ * their job after a restart (srv_mb_sensors_restore); the scene's come
+ * back with the stored scene bytes.
  *
  * Progress (0..1, of the current run target):
  *   iterations  (iteration - first iteration of the run) / n;
@@ -654,6 +656,96 @@ static json_t *sensor_json(srv *s, uint64_t job, const mbp_sensor *x)
 	return o;
 }
 
+/* ------------------------------------------------ sensors in the store */
+
+typedef struct sensor_task {
+	srv_task t;
+	uint64_t job;
+	char name[MB_SENSOR_NAME_MAX];
+	double pt[6];
+	json_t *reply;
+} sensor_task;
+
+static void sensor_run(srv *s, srv_task *t)
+{
+	sensor_task *k = (sensor_task *)t;
+	char msg[512];
+	pthread_mutex_lock(&s->store_mu);
+	int rc = srv_store_sensor_add(s->store, k->job, k->name, k->pt, msg,
+	                              sizeof(msg));
+	pthread_mutex_unlock(&s->store_mu);
+	if (rc != 0) {
+		srv_error("job %llu: cannot record sensor '%s': %s",
+		          (unsigned long long)k->job, k->name, msg);
+		json_decref(k->reply);
+		k->reply = rp_reply_error(t->id, RP_ERR_IO,
+		                          "the sensor was added but could not "
+		                          "be recorded (a restart will forget "
+		                          "it): %s",
+		                          msg);
+	}
+}
+
+static void sensor_done(srv *s, srv_task *t)
+{
+	sensor_task *k = (sensor_task *)t;
+	srv_reply_deferred(s, t->conn_id, k->reply);
+	json_decref(t->id);
+	free(k);
+}
+
+/* Write the sensor's row on the store thread, then send reply. */
+static cmd_result record_sensor(srv_req *r, uint64_t job, const char *name,
+                                const double pt[6], json_t *reply)
+{
+	sensor_task *k = calloc(1, sizeof(*k));
+	if (!k || !reply) {
+		free(k);
+		json_decref(reply);
+		return srv_req_fail(r, RP_ERR_NOMEM,
+		                    "out of memory (the sensor was added but "
+		                    "is not recorded)");
+	}
+	k->job = job;
+	snprintf(k->name, sizeof(k->name), "%s", name);
+	memcpy(k->pt, pt, sizeof(k->pt));
+	k->reply = reply;
+	k->t.run = sensor_run;
+	k->t.done = sensor_done;
+	k->t.conn_id = r->c->id;
+	k->t.id = json_incref(r->id);
+	srv_pool_submit(&r->s->store_pool, &k->t);
+	return CMD_DEFERRED;
+}
+
+static void restore_sensor(void *ud, uint64_t job, const char *name,
+                           const double pt[6])
+{
+	srv *s = ud;
+	srv_job *j = srv_job_find(s, job);
+	mbp_job *p = j ? job_record(s, j) : NULL;
+	if (!p) {
+		srv_warn("sensor '%s' of job %llu not restored: %s", name,
+		         (unsigned long long)job,
+		         j ? "out of memory" : "no such job");
+		return;
+	}
+	if (find_sensor(p, name)) {
+		srv_warn("job %llu: stored sensor '%s' duplicates one of the "
+		         "scene's; the scene's is kept",
+		         (unsigned long long)job, name);
+		return;
+	}
+	if (!add_sensor(p, name, pt, 1))
+		srv_warn("job %llu: out of memory for sensor '%s'",
+		         (unsigned long long)job, name);
+}
+
+int srv_mb_sensors_restore(srv *s, char *msg, size_t msglen)
+{
+	return srv_store_sensor_list(s->store, restore_sensor, s, msg, msglen);
+}
+
 cmd_result srv_cmd_sensor_add(srv_req *r)
 {
 	srv *s = r->s;
@@ -693,11 +785,12 @@ cmd_result srv_cmd_sensor_add(srv_req *r)
 	srv_info("job %llu: sensor '%s' added (slot %d)",
 	         (unsigned long long)j->id, x->name, slot);
 	evaluate(s, j, p, p->n - 1);
-	json_object_set_new(r->res, "job", json_integer((json_int_t)j->id));
-	json_object_set_new(r->res, "name", json_string(x->name));
-	json_object_set_new(r->res, "slot",
+	json_t *reply = rp_reply_ok(r->id);
+	json_object_set_new(reply, "job", json_integer((json_int_t)j->id));
+	json_object_set_new(reply, "name", json_string(x->name));
+	json_object_set_new(reply, "slot",
 	                    slot >= 0 ? json_integer(slot) : json_null());
-	return CMD_REPLY;
+	return record_sensor(r, j->id, x->name, pt, reply);
 }
 
 cmd_result srv_cmd_sensor_list(srv_req *r)

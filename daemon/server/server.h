@@ -506,6 +506,9 @@ int srv_mb_addr_text(srv *s, char *buf, size_t len);
 void srv_mb_tick(srv *s, double now);
 /* A job exists (created or restored): its values, its sensors declared. */
 void srv_mb_job_added(srv *s, srv_job *j);
+/* In srv_recover, once the jobs are back: their sensor.add sensors
+ * (0, or -1 with msg when the store cannot be read). */
+int srv_mb_sensors_restore(srv *s, char *msg, size_t msglen);
 /* After srv_recover: every restored job, in id order. */
 void srv_mb_recovered(srv *s);
 /* A job event reached the I/O thread (or the I/O thread changed the

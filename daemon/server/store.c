@@ -30,8 +30,10 @@
  * Each repair is noted in srv_store_repairs() for the daemon's log.
  * Files in scenes/ and results/ whose names are not ours are left alone.
  *
- * Schema versions: PRAGMA user_version (0 = empty database, 1 = this
- * layout).  A newer version is refused rather than misread.
+ * Schema versions: PRAGMA user_version (0 = empty database, 1 = scenes
+ * and jobs, 2 = this layout: 1 plus the sensors added over the protocol).
+ * An older database is brought up to date in one transaction at open; a
+ * newer one is refused rather than misread.
  *
  * Not thread-safe: one caller at a time (the daemon holds its lock).
  */
@@ -50,7 +52,7 @@
 #include <time.h>
 #include <unistd.h>
 
-#define SCHEMA_VERSION 1
+#define SCHEMA_VERSION 2
 #define DIRLEN 4096  /* the data directory, at most */
 #define PATHLEN 4200 /* DIRLEN + a file name of ours */
 
@@ -78,6 +80,16 @@ static const char schema_v1[] =
         " updated REAL NOT NULL);"
         "CREATE INDEX jobs_scene ON jobs(scene_id);"
         "PRAGMA user_version = 1;";
+
+/* 1 -> 2: sensors go with their job (ON DELETE CASCADE). */
+static const char schema_v2[] =
+        "CREATE TABLE sensors("
+        " job_id INTEGER NOT NULL REFERENCES jobs(id) ON DELETE CASCADE,"
+        " name TEXT NOT NULL,"
+        " x REAL NOT NULL, y REAL NOT NULL, z REAL NOT NULL,"
+        " nx REAL NOT NULL, ny REAL NOT NULL, nz REAL NOT NULL,"
+        " PRIMARY KEY(job_id, name));"
+        "PRAGMA user_version = 2;";
 
 #define JOB_COLS                                                               \
 	"id, scene_id, name, options_json, target_json, eps_log_json, "        \
@@ -113,7 +125,11 @@ static const char schema_v1[] =
 	X(JOB_NO_RESULT, "UPDATE jobs SET has_result = 0 WHERE id = ?1")       \
 	X(JOB_DELETE, "DELETE FROM jobs WHERE id = ?1")                        \
 	X(JOB_LIST, "SELECT " JOB_COLS " FROM jobs ORDER BY id")               \
-	X(JOB_SCENES, "SELECT id, scene_id FROM jobs ORDER BY id")
+	X(JOB_SCENES, "SELECT id, scene_id FROM jobs ORDER BY id")             \
+	X(SENSOR_INSERT, "INSERT INTO sensors(job_id, name, x, y, z, nx, ny, " \
+	                 "nz) VALUES(?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8)")         \
+	X(SENSOR_LIST, "SELECT job_id, name, x, y, z, nx, ny, nz FROM "        \
+	               "sensors ORDER BY job_id, rowid")
 
 enum {
 #define STMT_ENUM_(name, sql) ST_##name,
@@ -495,17 +511,23 @@ static int open_db(srv_store *st, char *msg, size_t msglen)
 		            "luxradd's (%d)",
 		            st->db_path, ver, SCHEMA_VERSION),
 		       -1;
-	if (ver == 0) {
+	if (ver < SCHEMA_VERSION) {
 		char *err = NULL;
 		if (sqlite3_exec(st->db, "BEGIN", NULL, NULL, NULL) !=
 		            SQLITE_OK ||
-		    sqlite3_exec(st->db, schema_v1, NULL, NULL, &err) !=
+		    (ver < 1 && sqlite3_exec(st->db, schema_v1, NULL, NULL,
+		                             &err) != SQLITE_OK) ||
+		    sqlite3_exec(st->db, schema_v2, NULL, NULL, &err) !=
 		            SQLITE_OK ||
 		    sqlite3_exec(st->db, "COMMIT", NULL, NULL, NULL) !=
 		            SQLITE_OK) {
-			fail(msg, msglen, "%s: cannot create the schema: %s",
-			     st->db_path, err ? err : sqlite3_errmsg(st->db));
+			fail(msg, msglen,
+			     "%s: cannot bring the schema from version %ld "
+			     "to %d: %s",
+			     st->db_path, ver, SCHEMA_VERSION,
+			     err ? err : sqlite3_errmsg(st->db));
 			sqlite3_free(err);
+			sqlite3_exec(st->db, "ROLLBACK", NULL, NULL, NULL);
 			return -1;
 		}
 	}
@@ -1119,4 +1141,36 @@ int srv_store_job_list(srv_store *st,
 	}
 	sqlite3_reset(s);
 	return rc == SQLITE_DONE ? 0 : sql_fail(st, "job list", msg, msglen);
+}
+
+/* --------------------------------------------------------------- sensors */
+
+int srv_store_sensor_add(srv_store *st, uint64_t job, const char *name,
+                         const double pt[6], char *msg, size_t msglen)
+{
+	sqlite3_stmt *s = stmt(st, ST_SENSOR_INSERT);
+	sqlite3_bind_int64(s, 1, sql_id(job));
+	bind_text(s, 2, name);
+	for (int k = 0; k < 6; k++)
+		sqlite3_bind_double(s, 3 + k, pt[k]);
+	return run(st, s, "sensor insert", msg, msglen);
+}
+
+int srv_store_sensor_list(srv_store *st,
+                          void (*fn)(void *ud, uint64_t job, const char *name,
+                                     const double pt[6]),
+                          void *ud, char *msg, size_t msglen)
+{
+	sqlite3_stmt *s = stmt(st, ST_SENSOR_LIST);
+	int rc;
+	while ((rc = sqlite3_step(s)) == SQLITE_ROW) {
+		char name[256];
+		double pt[6];
+		col_copy(s, 1, name, sizeof(name));
+		for (int k = 0; k < 6; k++)
+			pt[k] = sqlite3_column_double(s, 2 + k);
+		fn(ud, (uint64_t)sqlite3_column_int64(s, 0), name, pt);
+	}
+	sqlite3_reset(s);
+	return rc == SQLITE_DONE ? 0 : sql_fail(st, "sensor list", msg, msglen);
 }

@@ -120,4 +120,17 @@ int srv_store_job_list(srv_store *st,
                        void (*fn)(void *ud, const srv_job_row *r), void *ud,
                        char *msg, size_t msglen);
 
+/*
+ * Sensors added over the protocol (sensor.add), kept with their job: a
+ * job's deletion removes them.  pt is x y z nx ny nz.  Adding a name the
+ * job already has fails.  list calls fn for every sensor, by job id and
+ * then in the order they were added; fn must not write to the store.
+ */
+int srv_store_sensor_add(srv_store *st, uint64_t job, const char *name,
+                         const double pt[6], char *msg, size_t msglen);
+int srv_store_sensor_list(srv_store *st,
+                          void (*fn)(void *ud, uint64_t job, const char *name,
+                                     const double pt[6]),
+                          void *ud, char *msg, size_t msglen);
+
 #endif

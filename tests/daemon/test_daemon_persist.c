@@ -22,6 +22,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/wait.h>
+#include <unistd.h>
 
 #include <cmocka.h>
 
@@ -258,6 +259,44 @@ static void test_kill9_mid_solve_then_restart_resumes(void **state)
 	dm_pass();
 }
 
+/* A sensor added with sensor.add: the job's sensor.list entry, which must
+ * be there with the point given; waits (up to 30 s) for its value. */
+static double sensor_lux(dm_conn *c, const json_t *job, const char *name,
+                         const double pt[6])
+{
+	for (int tries = 0; tries < 300; tries++) {
+		json_t *r = dm_ok(c, "{s:s, s:O}", "cmd", "sensor.list", "job",
+		                  job);
+		json_t *arr = dm_get(r, "sensors"), *found = NULL;
+		for (size_t i = 0; i < json_array_size(arr); i++) {
+			json_t *x = json_array_get(arr, i);
+			const char *n =
+			        json_string_value(json_object_get(x, "name"));
+			if (n && !strcmp(n, name))
+				found = x;
+		}
+		if (!found)
+			fail_msg("sensor '%s' is gone: %s", name, dm_dumps(r));
+		assert_string_equal(
+		        json_string_value(json_object_get(found, "source")),
+		        "added");
+		json_t *p = json_object_get(found, "point");
+		for (int k = 0; k < 6; k++)
+			assert_true(json_number_value(json_array_get(p, k)) ==
+			            pt[k]);
+		json_t *lux = json_object_get(found, "lux");
+		if (json_is_number(lux)) {
+			double v = json_number_value(lux);
+			json_decref(r);
+			return v;
+		}
+		json_decref(r);
+		usleep(100000);
+	}
+	fail_msg("sensor '%s' got no value in 30 s", name);
+	return 0;
+}
+
 static void test_sigterm_exits_zero_and_restart_keeps_state(void **state)
 {
 	(void)state;
@@ -289,6 +328,18 @@ static void test_sigterm_exits_zero_and_restart_keeps_state(void **state)
 	json_decref(dm_wait_job(c, js[3].job, "cancelled", 120000));
 	for (int i = 0; i < 4; i++)
 		snap_take(c, &js[i]);
+	/* Sensors added over the protocol are recorded with their job. */
+	static const double desk[6] = {0.278, 0, 0.2796, 0, 1, 0};
+	json_decref(dm_ok(c, "{s:s, s:O, s:s, s:[ffffff]}", "cmd", "sensor.add",
+	                  "job", js[0].job, "name", "desk", "point", desk[0],
+	                  desk[1], desk[2], desk[3], desk[4], desk[5]));
+	double desk_lux = sensor_lux(c, js[0].job, "desk", desk);
+	/* A job's sensors go with it. */
+	json_t *gone = dm_job_create(c, cornell, "hr", opt);
+	json_decref(dm_ok(c, "{s:s, s:O, s:s, s:[ffffff]}", "cmd", "sensor.add",
+	                  "job", gone, "name", "desk", "point", desk[0],
+	                  desk[1], desk[2], desk[3], desk[4], desk[5]));
+	json_decref(dm_ok(c, "{s:s, s:O}", "cmd", "job.delete", "job", gone));
 	/* A job running at SIGTERM. */
 	json_t *hopt = json_pack("{s:i}", "threads", 1);
 	json_t *running = dm_job_create(c, hall, "hr", hopt);
@@ -310,6 +361,15 @@ static void test_sigterm_exits_zero_and_restart_keeps_state(void **state)
 	                                   "job never run", "cancelled job"};
 	for (int i = 0; i < 4; i++)
 		snap_same(c, &js[i], what[i]);
+	/* The added sensor is back, with the same value from the restored
+	 * solution, and still refuses a second sensor of its name. */
+	assert_true(sensor_lux(c, js[0].job, "desk", desk) == desk_lux);
+	json_decref(dm_err(c, "state", "{s:s, s:O, s:s, s:[ffffff]}", "cmd",
+	                   "sensor.add", "job", js[0].job, "name", "desk",
+	                   "point", desk[0], desk[1], desk[2], desk[3], desk[4],
+	                   desk[5]));
+	json_decref(dm_err(c, "not_found", "{s:s, s:O}", "cmd", "sensor.list",
+	                   "job", gone));
 	json_decref(dm_err(c, "state", "{s:s, s:O, s:[[f,f,f,i,i,i]]}", "cmd",
 	                   "query.points", "job", js[2].job, "points", 1.0,
 	                   0.01, 1.0, 0, 1, 0));
@@ -340,6 +400,7 @@ static void test_sigterm_exits_zero_and_restart_keeps_state(void **state)
 
 	json_decref(nj);
 	json_decref(ns);
+	json_decref(gone);
 	json_decref(counts);
 	json_decref(scenes);
 	json_decref(scenes2);

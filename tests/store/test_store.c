@@ -2,8 +2,9 @@
  * test_store.c -- luxradd's durable state: scenes and jobs survive a
  * reopen, checkpoints replace each other atomically, a process killed
  * with SIGKILL mid-write leaves a consistent store, damage done from
- * outside (files deleted, truncated, left over) is repaired at open, and
- * a corrupt database or an unwritable directory is a clear error.
+ * outside (files deleted, truncated, left over) is repaired at open, a
+ * corrupt database or an unwritable directory is a clear error, sensors
+ * are kept with their job, and a schema 1 database is upgraded.
  */
 #include <dirent.h>
 #include <errno.h>
@@ -611,6 +612,149 @@ static void test_corrupt_database_is_an_error(void **state)
 	assert_non_null(strstr(msg, "schema version 99 is newer"));
 }
 
+typedef struct sensors_seen {
+	int n;
+	uint64_t job[8];
+	char name[8][64];
+	double pt[8][6];
+} sensors_seen;
+
+static void on_sensor(void *ud, uint64_t job, const char *name,
+                      const double pt[6])
+{
+	sensors_seen *s = ud;
+	assert_true(s->n < 8);
+	s->job[s->n] = job;
+	snprintf(s->name[s->n], sizeof(s->name[0]), "%s", name);
+	memcpy(s->pt[s->n], pt, sizeof(s->pt[0]));
+	s->n++;
+}
+
+static sensors_seen sensors_of(srv_store *st)
+{
+	sensors_seen seen;
+	char msg[1024];
+	memset(&seen, 0, sizeof(seen));
+	assert_int_equal(
+	        srv_store_sensor_list(st, on_sensor, &seen, msg, sizeof(msg)),
+	        0);
+	return seen;
+}
+
+/* Add a scene and n jobs on it (ids into job[]). */
+static void scene_with_jobs(srv_store *st, int n, uint64_t *job)
+{
+	char msg[1024];
+	uint64_t scene;
+	assert_int_equal(srv_store_scene_add(st, "s", "data", 4, &scene, msg,
+	                                     sizeof(msg)),
+	                 0);
+	for (int i = 0; i < n; i++) {
+		srv_job_row row;
+		memset(&row, 0, sizeof(row));
+		row.scene_id = scene;
+		assert_int_equal(srv_store_job_add(st, &row, msg, sizeof(msg)),
+		                 0);
+		job[i] = row.id;
+	}
+}
+
+/* Sensors added over the protocol: kept per job, in order, through a
+ * reopen; a duplicate name or an unknown job is refused; deleting the
+ * job removes them. */
+static void test_sensors_persist(void **state)
+{
+	(void)state;
+	const char *dir = new_dir("sensors");
+	srv_store *st = open_ok(dir);
+	char msg[1024];
+	uint64_t jobs[2];
+	scene_with_jobs(st, 2, jobs);
+	uint64_t j1 = jobs[0], j2 = jobs[1];
+	const double desk[6] = {0.278, 0, 0.2796, 0, 1, 0};
+	const double door[6] = {-1.5, 2.25e-3, 1e6, 1, 0, -0.5};
+	assert_int_equal(
+	        srv_store_sensor_add(st, j2, "desk", door, msg, sizeof(msg)),
+	        0);
+	assert_int_equal(
+	        srv_store_sensor_add(st, j1, "desk", desk, msg, sizeof(msg)),
+	        0);
+	assert_int_equal(
+	        srv_store_sensor_add(st, j1, "door", door, msg, sizeof(msg)),
+	        0);
+	assert_int_equal(
+	        srv_store_sensor_add(st, j1, "desk", door, msg, sizeof(msg)),
+	        -1);
+	assert_non_null(strstr(msg, "UNIQUE"));
+	assert_int_equal(
+	        srv_store_sensor_add(st, j2 + 50, "x", desk, msg, sizeof(msg)),
+	        -1);
+	assert_non_null(strstr(msg, "FOREIGN KEY"));
+	srv_store_close(st);
+
+	st = open_ok(dir);
+	sensors_seen seen = sensors_of(st);
+	assert_int_equal(seen.n, 3);
+	assert_true(seen.job[0] == j1 && seen.job[1] == j1 &&
+	            seen.job[2] == j2);
+	assert_string_equal(seen.name[0], "desk");
+	assert_string_equal(seen.name[1], "door");
+	assert_string_equal(seen.name[2], "desk");
+	assert_memory_equal(seen.pt[0], desk, sizeof(desk));
+	assert_memory_equal(seen.pt[1], door, sizeof(door));
+	assert_memory_equal(seen.pt[2], door, sizeof(door));
+	assert_int_equal(srv_store_job_delete(st, j1, msg, sizeof(msg)), 0);
+	seen = sensors_of(st);
+	assert_int_equal(seen.n, 1);
+	assert_true(seen.job[0] == j2);
+	srv_store_close(st);
+}
+
+/* A version 1 database (before sensors were stored) is brought up to
+ * version 2 at open, its scenes and jobs kept. */
+static void test_schema_1_is_upgraded(void **state)
+{
+	(void)state;
+	const char *d = new_dir("schema1");
+	char dir[512], path[700], msg[1024];
+	snprintf(dir, sizeof(dir), "%s", d);
+	srv_store *st = open_ok(dir);
+	uint64_t job;
+	scene_with_jobs(st, 1, &job);
+	srv_store_close(st);
+	/* Make it what luxradd with schema 1 left. */
+	snprintf(path, sizeof(path), "%s/luxradd.db", dir);
+	sqlite3 *db;
+	assert_int_equal(sqlite3_open(path, &db), SQLITE_OK);
+	assert_int_equal(sqlite3_exec(db,
+	                              "DROP TABLE sensors; "
+	                              "PRAGMA user_version = 1",
+	                              NULL, NULL, NULL),
+	                 SQLITE_OK);
+	sqlite3_close(db);
+
+	st = open_ok(dir);
+	scenes_seen sc;
+	jobs_seen jb;
+	list_all(st, &sc, &jb);
+	assert_int_equal(sc.n, 1);
+	assert_int_equal(jb.n, 1);
+	jobs_clear(&jb);
+	const double pt[6] = {1, 2, 3, 0, 0, 1};
+	assert_int_equal(
+	        srv_store_sensor_add(st, job, "s", pt, msg, sizeof(msg)), 0);
+	srv_store_close(st);
+	assert_int_equal(sqlite3_open(path, &db), SQLITE_OK);
+	sqlite3_stmt *q;
+	assert_int_equal(
+	        sqlite3_prepare_v2(db, "PRAGMA user_version", -1, &q, NULL),
+	        SQLITE_OK);
+	assert_int_equal(sqlite3_step(q), SQLITE_ROW);
+	assert_int_equal(sqlite3_column_int(q, 0), 2);
+	sqlite3_finalize(q);
+	sqlite3_close(db);
+}
+
 static void test_unwritable_directory_is_an_error(void **state)
 {
 	(void)state;
@@ -656,6 +800,8 @@ int main(void)
 	        cmocka_unit_test(test_second_open_is_refused),
 	        cmocka_unit_test(test_corrupt_database_is_an_error),
 	        cmocka_unit_test(test_unwritable_directory_is_an_error),
+	        cmocka_unit_test(test_sensors_persist),
+	        cmocka_unit_test(test_schema_1_is_upgraded),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);
 }
