@@ -88,7 +88,9 @@ enum {
 	X(V, "v", 1, "X,Y,Z", "grid: second side, from the origin")            \
 	X(SPACING, "spacing", 1, "P",                                          \
 	  "grid: point spacing in metres [EN 12464-1]")                        \
-	X(NORMAL, "normal", 1, "X,Y,Z", "grid: surface normal [u x v]")        \
+	X(NORMAL, "normal", 1, "X,Y,Z",                                        \
+	  "surface normal (grid: [u x v]; sensor-add: [0,1,0])")               \
+	X(AT, "at", 1, "X,Y,Z", "sensor-add: the sensor's position, metres")   \
 	X(OUTPUT, "output", 1, "FILE", "export: the GLB file to write (-o)")
 
 typedef enum lx_opt {
@@ -184,6 +186,14 @@ const char *lx_jnum(const json_t *o, const char *k, const char *fmt, char *buf,
                     size_t len);
 const char *lx_jbytes(const json_t *o, const char *k, char *buf, size_t len);
 
+/* ---------------------------------------------------------- cmds.c */
+
+/* A request naming one object: {"cmd": name, key: id}. */
+json_t *lx_req_id(rp_cmd cmd, const char *key, long long id);
+/* Connect, send req (stolen) and wait for the reply, printed under
+ * --json; the caller prints it otherwise and decrefs *reply either way. */
+int lx_simple_call(lx_ctx *cx, json_t *req, json_t **reply);
+
 /* ------------------------------------------------------------- commands */
 
 int lx_cmd_submit(lx_ctx *cx);
@@ -200,6 +210,8 @@ int lx_cmd_shutdown(lx_ctx *cx);
 int lx_cmd_watch(lx_ctx *cx);
 int lx_cmd_query(lx_ctx *cx);
 int lx_cmd_export(lx_ctx *cx);
+int lx_cmd_sensor_add(lx_ctx *cx);
+int lx_cmd_sensors(lx_ctx *cx);
 
 /* Build job.create's "options" from the command line; -1 usage error. */
 int lx_job_options(lx_ctx *cx, json_t *req);

@@ -22,16 +22,14 @@
 
 /* ------------------------------------------------------- reply helpers */
 
-/* A request naming one object: {"cmd": name, key: id}. */
-static json_t *req_id(rp_cmd cmd, const char *key, long long id)
+json_t *lx_req_id(rp_cmd cmd, const char *key, long long id)
 {
 	json_t *r = rp_request(cmd, -1);
 	json_object_set_new(r, key, json_integer(id));
 	return r;
 }
 
-/* Connect, send req (stolen), print the reply under --json. */
-static int simple_call(lx_ctx *cx, json_t *req, json_t **reply)
+int lx_simple_call(lx_ctx *cx, json_t *req, json_t **reply)
 {
 	int rc = lx_open(cx);
 
@@ -192,7 +190,7 @@ static int create_and_run(lx_ctx *cx, json_t *create, long long *job)
 		if (cx->json)
 			lx_print_json(reply);
 		json_decref(reply);
-		json_t *run = req_id(RP_CMD_JOB_RUN, "job", *job);
+		json_t *run = lx_req_id(RP_CMD_JOB_RUN, "job", *job);
 		json_object_set_new(run, "converge", json_true());
 		rc = lx_call(cx, run, &reply);
 		if (rc == LX_EXIT_OK && cx->json)
@@ -262,7 +260,7 @@ static void fmt_time(double t, char *buf, size_t len)
 int lx_cmd_scenes(lx_ctx *cx)
 {
 	json_t *reply;
-	int rc = simple_call(cx, rp_request(RP_CMD_SCENE_LIST, -1), &reply);
+	int rc = lx_simple_call(cx, rp_request(RP_CMD_SCENE_LIST, -1), &reply);
 	json_t *list = json_object_get(reply, "scenes"), *s;
 	size_t i;
 
@@ -290,7 +288,7 @@ int lx_cmd_scenes(lx_ctx *cx)
 int lx_cmd_jobs(lx_ctx *cx)
 {
 	json_t *reply;
-	int rc = simple_call(cx, rp_request(RP_CMD_JOB_LIST, -1), &reply);
+	int rc = lx_simple_call(cx, rp_request(RP_CMD_JOB_LIST, -1), &reply);
 	json_t *list = json_object_get(reply, "jobs"), *j;
 	size_t i;
 
@@ -324,7 +322,7 @@ int lx_cmd_create(lx_ctx *cx)
 
 	if (lx_pos_id(cx, 0, "scene", &scene) != 0)
 		return LX_EXIT_USAGE;
-	req = req_id(RP_CMD_JOB_CREATE, "scene", scene);
+	req = lx_req_id(RP_CMD_JOB_CREATE, "scene", scene);
 	if (lx_job_options(cx, req) != 0) {
 		json_decref(req);
 		return LX_EXIT_USAGE;
@@ -332,7 +330,7 @@ int lx_cmd_create(lx_ctx *cx)
 	if (cx->given[LX_OPT_NAME])
 		json_object_set_new(req, "name",
 		                    json_string(cx->val[LX_OPT_NAME]));
-	rc = simple_call(cx, req, &reply);
+	rc = lx_simple_call(cx, req, &reply);
 	if (rc == LX_EXIT_OK && !cx->json)
 		printf("%lld\n", lx_jint(reply, "job"));
 	json_decref(reply);
@@ -364,7 +362,7 @@ static void run_event(void *ud, json_t *ev)
 /* The run request: exactly one target, checked locally. */
 static json_t *run_request(lx_ctx *cx, long long job)
 {
-	json_t *req = req_id(RP_CMD_JOB_RUN, "job", job);
+	json_t *req = lx_req_id(RP_CMD_JOB_RUN, "job", job);
 	long long n;
 	double t;
 
@@ -403,7 +401,7 @@ static void print_outcome(lx_ctx *cx, long long job, const char *state)
 	json_t *reply = NULL, *j, *st;
 	char a[32], b[32];
 
-	if (lx_call(cx, req_id(RP_CMD_JOB_INFO, "job", job), &reply) != 0) {
+	if (lx_call(cx, lx_req_id(RP_CMD_JOB_INFO, "job", job), &reply) != 0) {
 		printf("job %lld: %s\n", job, state);
 		json_decref(reply);
 		return;
@@ -437,7 +435,7 @@ int lx_cmd_run(lx_ctx *cx)
 	}
 	/* Subscribe first: no transition can then slip by unseen. */
 	if (cx->given[LX_OPT_WAIT] &&
-	    (rc = lx_call(cx, req_id(RP_CMD_SUBSCRIBE, "job", w.job),
+	    (rc = lx_call(cx, lx_req_id(RP_CMD_SUBSCRIBE, "job", w.job),
 	                  &reply)) != 0) {
 		json_decref(req);
 		json_decref(reply);
@@ -481,7 +479,7 @@ int lx_cmd_control(lx_ctx *cx)
 
 	if (lx_pos_id(cx, 0, "job", &job) != 0)
 		return LX_EXIT_USAGE;
-	rc = simple_call(cx, req_id(cmd, "job", job), &reply);
+	rc = lx_simple_call(cx, lx_req_id(cmd, "job", job), &reply);
 	if (rc == LX_EXIT_OK && !cx->json)
 		printf("job %lld: %s\n", job, lx_jstr(reply, "state"));
 	json_decref(reply);
@@ -502,9 +500,9 @@ int lx_cmd_set(lx_ctx *cx)
 		return lx_usage_error(cx, "nothing to set: give --eps E");
 	if (rc < 0)
 		return LX_EXIT_USAGE;
-	req = req_id(RP_CMD_JOB_SET, "job", job);
+	req = lx_req_id(RP_CMD_JOB_SET, "job", job);
 	json_object_set_new(req, "eps", json_real(eps));
-	rc = simple_call(cx, req, &reply);
+	rc = lx_simple_call(cx, req, &reply);
 	if (rc == LX_EXIT_OK && !cx->json)
 		printf("job %lld: eps %g\n", job,
 		       json_number_value(json_object_get(reply, "eps")));
@@ -522,9 +520,10 @@ int lx_cmd_delete(lx_ctx *cx)
 
 	if (lx_pos_id(cx, 0, what, &id) != 0)
 		return LX_EXIT_USAGE;
-	rc = simple_call(
+	rc = lx_simple_call(
 	        cx,
-	        req_id(job ? RP_CMD_JOB_DELETE : RP_CMD_SCENE_DELETE, what, id),
+	        lx_req_id(job ? RP_CMD_JOB_DELETE : RP_CMD_SCENE_DELETE, what,
+	                  id),
 	        &reply);
 	if (rc == LX_EXIT_OK && !cx->json)
 		printf("deleted %s %lld\n", what, id);
@@ -535,7 +534,7 @@ int lx_cmd_delete(lx_ctx *cx)
 int lx_cmd_shutdown(lx_ctx *cx)
 {
 	json_t *reply;
-	int rc = simple_call(cx, rp_request(RP_CMD_SHUTDOWN, -1), &reply);
+	int rc = lx_simple_call(cx, rp_request(RP_CMD_SHUTDOWN, -1), &reply);
 
 	if (rc == LX_EXIT_OK && !cx->json)
 		printf("luxradd is shutting down (jobs are checkpointed)\n");

@@ -126,6 +126,22 @@ static const cmd_def commands[] = {
         {"info", lx_cmd_info, 1, 0, "JOB",
          "one job: state, options, latest statistics",
          "Examples:\n  luxrad info 4\n  luxrad info 4 --json\n"},
+        {"sensor-add", lx_cmd_sensor_add, 2, LX_BIT(AT) | LX_BIT(NORMAL),
+         "JOB NAME --at X,Y,Z [--normal X,Y,Z]",
+         "add a named illuminance sensor to a job (Modbus)",
+         "The daemon evaluates the sensor after every iteration, as luxrad "
+         "query\n--points would, and publishes its lux in a Modbus sensor "
+         "slot\n(daemon/server/MODBUS.md). The normal is that of the surface "
+         "the sensor\nlies on (upward by default, for a work plane). The "
+         "sensor is stored with\nthe job: it survives a daemon restart and "
+         "goes when the job is deleted.\nNAME is 1..63 bytes.\n\nExamples:\n"
+         "  luxrad sensor-add 4 desk --at 2.0,0.75,1.5\n"
+         "  luxrad sensor-add 4 wall --at 0,1.2,1.5 --normal 1,0,0\n"},
+        {"sensors", lx_cmd_sensors, 1, 0, "JOB",
+         "a job's sensors: source, Modbus slot, latest lux",
+         "source is scene (a glTF node named sensor:<name>) or added "
+         "(sensor-add);\nlux and iteration are ? before the first value.\n\n"
+         "Examples:\n  luxrad sensors 4\n  luxrad sensors 4 --json\n"},
         {"status", lx_cmd_status, 0, 0, "",
          "daemon: uptime, jobs by state, memory",
          "Examples:\n  luxrad status\n"},

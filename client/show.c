@@ -110,14 +110,8 @@ int lx_cmd_info(lx_ctx *cx)
 
 	if (lx_pos_id(cx, 0, "job", &id) != 0)
 		return LX_EXIT_USAGE;
-	if ((rc = lx_open(cx)) != 0)
-		return rc;
-	json_t *req = rp_request(RP_CMD_JOB_INFO, -1);
-	json_object_set_new(req, "job", json_integer(id));
-	rc = lx_call(cx, req, &reply);
+	rc = lx_simple_call(cx, lx_req_id(RP_CMD_JOB_INFO, "job", id), &reply);
 	if (rc != LX_EXIT_OK || cx->json) {
-		if (rc == LX_EXIT_OK)
-			lx_print_json(reply);
 		json_decref(reply);
 		return rc;
 	}

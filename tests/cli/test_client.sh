@@ -133,6 +133,12 @@ run export 3
 expect_exit "export without -o" 2 "-o FILE.glb"
 run set 3
 expect_exit "set without --eps" 2 "give --eps"
+run sensor-add 3 desk
+expect_exit "sensor-add without --at" 2 "--at X,Y,Z"
+run sensor-add 3 desk --at 0,0,0 --normal 0,0,0
+expect_exit "sensor-add zero normal" 2 "--normal: must not be zero"
+run sensor-add 3 --at 0,0,0
+expect_exit "sensor-add without a name" 2 "missing argument"
 run submit "$TMP/missing.gltf"
 expect_exit "submit a missing file" 2 "cannot read scene file"
 run submit "$SCENE" --eps 1e-3
@@ -272,6 +278,33 @@ import json, sys
 r = json.load(open(sys.argv[1]))
 assert r["ok"] is True and len(r["lux"]) == 3, r
 ' "$TMP/out"
+
+# Sensors: added, listed, evaluated on the solution as query.points is.
+run sensor-add "$JOB" desk --at 0.278,0.0,0.2796
+expect_exit "sensor-add" 0
+expect_out "sensor-add reports the sensor" "sensor 'desk' added"
+run sensor-add "$JOB" desk --at 0.1,0,0.1
+expect_exit "sensor-add of a name the job has" 1 "already has a sensor 'desk'"
+for _ in $(seq 50); do
+	run sensors "$JOB" --json
+	grep -q '"lux": *[0-9]' "$TMP/out" && break
+	sleep 0.1
+done
+cp "$TMP/out" "$TMP/sensors.json"
+printf '0.278 0.0 0.2796 0 1 0\n' >"$TMP/desk.txt"
+run query "$JOB" --points "$TMP/desk.txt" --json
+check_py "sensors --json: desk, added, the lux query.points gives" '
+import json, sys
+s = json.load(open(sys.argv[1]))["sensors"]
+q = json.load(open(sys.argv[2]))["lux"][0]
+d = [x for x in s if x["name"] == "desk"]
+assert len(d) == 1 and d[0]["source"] == "added", s
+assert d[0]["point"] == [0.278, 0, 0.2796, 0, 1, 0], d
+assert d[0]["lux"] == q, (d, q)
+' "$TMP/sensors.json" "$TMP/out"
+run sensors "$JOB"
+expect_out "sensors is a table" "desk"
+expect_out "sensors shows the source" "added"
 
 run query "$JOB" --grid --origin 0,0.001,0 --u 0.556,0,0 --v 0,0,0.5592
 expect_exit "query --grid" 0 "grid "
