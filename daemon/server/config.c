@@ -36,6 +36,7 @@
  *   5. none: data_dir stays "" and srv_config_check asks for one.
  */
 #include "config.h"
+#include "textutil.h"
 
 #include <errno.h>
 #include <getopt.h>
@@ -143,18 +144,6 @@ static const cfg_key keys[] = {
 #define NKEYS (sizeof(keys) / sizeof(keys[0]))
 
 static const char *const level_names[] = {"error", "warn", "info", "debug"};
-
-static void fail(char *msg, size_t msglen, const char *fmt, ...)
-        __attribute__((format(printf, 3, 4)));
-static void fail(char *msg, size_t msglen, const char *fmt, ...)
-{
-	va_list ap;
-	if (!msg || !msglen)
-		return;
-	va_start(ap, fmt);
-	vsnprintf(msg, msglen, fmt, ap);
-	va_end(ap);
-}
 
 /* ------------------------------------------------------------- defaults */
 
@@ -299,31 +288,6 @@ static int parse_size(const char *v, uint64_t *out)
 	return -1;
 }
 
-/* "30", "30s", "1.5m", "2h", "250ms": seconds.  -1 if malformed. */
-static int parse_seconds(const char *v, double *out)
-{
-	char *end;
-	if ((*v < '0' || *v > '9') && *v != '.')
-		return -1;
-	errno = 0;
-	double x = strtod(v, &end);
-	if (errno || !isfinite(x) || end == v)
-		return -1;
-	while (*end == ' ' || *end == '\t')
-		end++;
-	if (strcmp(end, "") == 0 || strcmp(end, "s") == 0)
-		*out = x;
-	else if (strcmp(end, "ms") == 0)
-		*out = x / 1000;
-	else if (strcmp(end, "m") == 0 || strcmp(end, "min") == 0)
-		*out = x * 60;
-	else if (strcmp(end, "h") == 0)
-		*out = x * 3600;
-	else
-		return -1;
-	return 0;
-}
-
 int srv_hostport_parse(const char *s, char *host, size_t hostlen, int *port,
                        char *msg, size_t msglen)
 {
@@ -332,44 +296,38 @@ int srv_hostport_parse(const char *s, char *host, size_t hostlen, int *port,
 	if (s[0] == '[') { /* [v6addr]:port */
 		const char *rb = strchr(s, ']');
 		if (!rb || rb[1] != ':')
-			return fail(msg, msglen,
-			            "'%s' is not [IPV6]:PORT (e.g. [::1]:7420)",
-			            s),
-			       -1;
+			return srv_fail(
+			        msg, msglen,
+			        "'%s' is not [IPV6]:PORT (e.g. [::1]:7420)", s);
 		h = s + 1;
 		hl = (size_t)(rb - h);
 		colon = rb + 1;
 	} else {
 		colon = strrchr(s, ':');
 		if (!colon || memchr(s, ':', (size_t)(colon - s)))
-			return fail(msg, msglen,
-			            "'%s' is not HOST:PORT (e.g. "
-			            "127.0.0.1:7420; "
-			            "IPv6 as [::1]:7420)",
-			            s),
-			       -1;
+			return srv_fail(msg, msglen,
+			                "'%s' is not HOST:PORT (e.g. "
+			                "127.0.0.1:7420; IPv6 as [::1]:7420)",
+			                s);
 		hl = (size_t)(colon - s);
 	}
 	if (hl == 0)
-		return fail(msg, msglen,
-		            "'%s' has no host (0.0.0.0 = every IPv4 interface, "
-		            "[::] = every IPv6 one)",
-		            s),
-		       -1;
+		return srv_fail(msg, msglen,
+		                "'%s' has no host (0.0.0.0 = every IPv4 "
+		                "interface, [::] = every IPv6 one)",
+		                s);
 	if (hl >= hostlen)
-		return fail(msg, msglen, "'%s': host name too long", s), -1;
+		return srv_fail(msg, msglen, "'%s': host name too long", s);
 	char *end;
 	errno = 0;
 	long p = strtol(colon + 1, &end, 10);
 	if (colon[1] < '0' || colon[1] > '9' || *end || errno || p > 65535)
-		return fail(msg, msglen,
-		            "'%s': port must be a number in 0..65535", s),
-		       -1;
+		return srv_fail(msg, msglen,
+		                "'%s': port must be a number in 0..65535", s);
 	for (size_t i = 0; i < hl; i++)
 		if (h[i] <= ' ' || h[i] == '/' || h[i] == '[' || h[i] == ']')
-			return fail(msg, msglen, "'%s': bad character in host",
-			            s),
-			       -1;
+			return srv_fail(msg, msglen,
+			                "'%s': bad character in host", s);
 	memcpy(host, h, hl);
 	host[hl] = '\0';
 	*port = (int)p;
@@ -383,21 +341,19 @@ static int set_path(char *dst, size_t size, const char *v, char *msg,
 	char cwd[4096];
 	if (v[0] == '/') {
 		if (copy_str(dst, size, v) < 0)
-			return fail(msg, msglen,
-			            "path too long (%zu bytes max)", size - 1),
-			       -1;
+			return srv_fail(msg, msglen,
+			                "path too long (%zu bytes max)",
+			                size - 1);
 		return 0;
 	}
 	if (!getcwd(cwd, sizeof(cwd)))
-		return fail(msg, msglen,
-		            "'%s' is relative and the working directory is "
-		            "unknown (%s): give an absolute path",
-		            v, strerror(errno)),
-		       -1;
+		return srv_fail(msg, msglen,
+		                "'%s' is relative and the working directory is "
+		                "unknown (%s): give an absolute path",
+		                v, strerror(errno));
 	if (join_path(dst, size, cwd, v) < 0)
-		return fail(msg, msglen, "path too long (%zu bytes max)",
-		            size - 1),
-		       -1;
+		return srv_fail(msg, msglen, "path too long (%zu bytes max)",
+		                size - 1);
 	return 0;
 }
 
@@ -410,43 +366,37 @@ static int set_number(srv_config *c, const cfg_key *k, const char *v, char *msg,
 		errno = 0;
 		long n = strtol(v, &end, 10);
 		if (end == v || *end || errno)
-			return fail(msg, msglen, "'%s' is not an integer", v),
-			       -1;
+			return srv_fail(msg, msglen, "'%s' is not an integer",
+			                v);
 		if (n < k->lo || n > k->hi)
-			return fail(msg, msglen, "%ld is out of range %g..%g",
-			            n, k->lo, k->hi),
-			       -1;
+			return srv_fail(msg, msglen,
+			                "%ld is out of range %g..%g", n, k->lo,
+			                k->hi);
 		*(int *)p = (int)n;
 	} else if (k->type == K_SIZE) {
 		uint64_t n;
 		if (parse_size(v, &n) < 0)
-			return fail(msg, msglen,
-			            "'%s' is not a size (bytes, or with a K, "
-			            "M, "
-			            "G or T suffix: 4M, 1GiB)",
-			            v),
-			       -1;
+			return srv_fail(msg, msglen,
+			                "'%s' is not a size (bytes, or with a "
+			                "K, M, G or T suffix: 4M, 1GiB)",
+			                v);
 		if ((double)n < k->lo || (double)n > k->hi)
-			return fail(msg, msglen,
-			            "'%s' is out of range %.0f..%.0f "
-			            "bytes",
-			            v, k->lo, k->hi),
-			       -1;
+			return srv_fail(msg, msglen,
+			                "'%s' is out of range %.0f..%.0f bytes",
+			                v, k->lo, k->hi);
 		*(size_t *)p = (size_t)n;
 	} else {
 		double s;
-		if (parse_seconds(v, &s) < 0)
-			return fail(msg, msglen,
-			            "'%s' is not a duration (seconds, or with "
-			            "s, "
-			            "m, h, ms suffixes: 30, 30s, 5m)",
-			            v),
-			       -1;
+		if (srv_parse_seconds(v, &s) < 0)
+			return srv_fail(
+			        msg, msglen,
+			        "'%s' is not a duration (seconds, or with s, "
+			        "m, h, ms suffixes: 30, 30s, 5m)",
+			        v);
 		if (s < k->lo || s > k->hi)
-			return fail(msg, msglen,
-			            "'%s' is out of range %gs..%gs", v, k->lo,
-			            k->hi),
-			       -1;
+			return srv_fail(msg, msglen,
+			                "'%s' is out of range %gs..%gs", v,
+			                k->lo, k->hi);
 		*(double *)p = s;
 	}
 	return 0;
@@ -465,7 +415,7 @@ static int set_value(srv_config *c, const cfg_key *k, const char *v, char *msg,
 		                       msglen) < 0)
 			return -1;
 		if (copy_str(p, k->size, v) < 0)
-			return fail(msg, msglen, "'%s' is too long", v), -1;
+			return srv_fail(msg, msglen, "'%s' is too long", v);
 		return 0;
 	case K_UNIX:
 		c->listen_unix_set = 1;
@@ -478,24 +428,21 @@ static int set_value(srv_config *c, const cfg_key *k, const char *v, char *msg,
 		return set_path(p, k->size, v, msg, msglen);
 	case K_DIR:
 		if (is_none(v))
-			return fail(msg, msglen,
-			            "a data directory is required"),
-			       -1;
+			return srv_fail(msg, msglen,
+			                "a data directory is required");
 		if (set_path(p, k->size, v, msg, msglen) < 0)
 			return -1;
 		if (!c->listen_unix_set &&
 		    join_path(c->listen_unix, sizeof(c->listen_unix), p,
 		              SOCK_NAME) < 0)
-			return fail(msg, msglen, "path too long"), -1;
+			return srv_fail(msg, msglen, "path too long");
 		return 0;
 	case K_BOOL:
 		if (parse_bool(v, &b) < 0)
-			return fail(msg, msglen,
-			            "'%s' is not a boolean (true/false, "
-			            "yes/no, "
-			            "on/off, 1/0)",
-			            v),
-			       -1;
+			return srv_fail(msg, msglen,
+			                "'%s' is not a boolean (true/false, "
+			                "yes/no, on/off, 1/0)",
+			                v);
 		*(int *)p = b;
 		return 0;
 	case K_LEVEL:
@@ -505,11 +452,10 @@ static int set_value(srv_config *c, const cfg_key *k, const char *v, char *msg,
 			     strcasecmp(v, "warning") == 0))
 				return *(srv_log_level *)p = (srv_log_level)i,
 				                       0;
-		return fail(msg, msglen,
-		            "'%s' is not a log level (error, warn, info, "
-		            "debug)",
-		            v),
-		       -1;
+		return srv_fail(
+		        msg, msglen,
+		        "'%s' is not a log level (error, warn, info, debug)",
+		        v);
 	case K_MODBUS:
 		return mb_config_set(&c->modbus, k->name, v, msg, msglen);
 	default:
@@ -557,7 +503,7 @@ static int split_line(char *line, char **key, size_t *keylen, char **val,
 	while (*s == ' ' || *s == '\t')
 		s++;
 	if (*keylen == 0 || *s != '=')
-		return fail(msg, msglen, "expected 'key = value'"), -1;
+		return srv_fail(msg, msglen, "expected 'key = value'");
 	s++;
 	while (*s == ' ' || *s == '\t')
 		s++;
@@ -565,16 +511,16 @@ static int split_line(char *line, char **key, size_t *keylen, char **val,
 		char q = *s++;
 		e = strchr(s, q);
 		if (!e)
-			return fail(msg, msglen, "unterminated %c quote", q),
-			       -1;
+			return srv_fail(msg, msglen, "unterminated %c quote",
+			                q);
 		*e++ = '\0';
 		*val = s;
 		while (*e == ' ' || *e == '\t')
 			e++;
 		if (*e && *e != '#')
-			return fail(msg, msglen,
-			            "unexpected text after the closing quote"),
-			       -1;
+			return srv_fail(
+			        msg, msglen,
+			        "unexpected text after the closing quote");
 		return 1;
 	}
 	*val = s;
@@ -590,22 +536,23 @@ static int split_line(char *line, char **key, size_t *keylen, char **val,
 static int load_line(srv_config *c, char *line, const char *path,
                      unsigned lineno, char *msg, size_t msglen)
 {
-	char *key, *val, why[600];
+	char *key = NULL, *val = NULL, why[600];
 	size_t keylen;
 	int r = split_line(line, &key, &keylen, &val, why, sizeof(why));
 	if (r <= 0) {
 		if (r < 0)
-			fail(msg, msglen, "%s:%u: %s", path, lineno, why);
+			srv_fail(msg, msglen, "%s:%u: %s", path, lineno, why);
 		return r;
 	}
 	const cfg_key *k = find_key(key, keylen);
 	if (!k) {
-		fail(msg, msglen, "%s:%u: unknown key '%.*s'", path, lineno,
-		     (int)(keylen > 100 ? 100 : keylen), key);
+		srv_fail(msg, msglen, "%s:%u: unknown key '%.*s'", path, lineno,
+		         (int)(keylen > 100 ? 100 : keylen), key);
 		return -1;
 	}
 	if (set_value(c, k, val, why, sizeof(why)) < 0) {
-		fail(msg, msglen, "%s:%u: %s: %s", path, lineno, k->name, why);
+		srv_fail(msg, msglen, "%s:%u: %s: %s", path, lineno, k->name,
+		         why);
 		return -1;
 	}
 	return 0;
@@ -618,8 +565,8 @@ int srv_config_load_file(srv_config *c, const char *path, int must_exist,
 	if (!f) {
 		if (errno == ENOENT && !must_exist)
 			return 0;
-		fail(msg, msglen, "%s: cannot open config file: %s", path,
-		     strerror(errno));
+		srv_fail(msg, msglen, "%s: cannot open config file: %s", path,
+		         strerror(errno));
 		return -1;
 	}
 	char *line = NULL;
@@ -630,12 +577,14 @@ int srv_config_load_file(srv_config *c, const char *path, int must_exist,
 	while (rc == 0 && (n = getline(&line, &cap, f)) >= 0) {
 		lineno++;
 		if (n > MAX_LINE) {
-			fail(msg, msglen, "%s:%u: line longer than %d bytes",
-			     path, lineno, MAX_LINE);
+			srv_fail(msg, msglen,
+			         "%s:%u: line longer than %d bytes", path,
+			         lineno, MAX_LINE);
 			rc = -1;
 		} else if ((size_t)n != strlen(line)) {
-			fail(msg, msglen, "%s:%u: NUL byte (not a text file?)",
-			     path, lineno);
+			srv_fail(msg, msglen,
+			         "%s:%u: NUL byte (not a text file?)", path,
+			         lineno);
 			rc = -1;
 		} else {
 			line[strcspn(line, "\r\n")] = '\0';
@@ -645,7 +594,8 @@ int srv_config_load_file(srv_config *c, const char *path, int must_exist,
 		}
 	}
 	if (rc == 0 && ferror(f)) {
-		fail(msg, msglen, "%s: read error: %s", path, strerror(errno));
+		srv_fail(msg, msglen, "%s: read error: %s", path,
+		         strerror(errno));
 		rc = -1;
 	}
 	free(line);
@@ -659,29 +609,28 @@ int srv_config_check(const srv_config *c, char *msg, size_t msglen)
 {
 	struct sockaddr_un sun;
 	if (!c->data_dir[0]) {
-		fail(msg, msglen,
-		     "data_dir: no default (STATE_DIRECTORY, XDG_STATE_HOME "
-		     "and "
-		     "HOME are unset): set data_dir");
+		srv_fail(msg, msglen,
+		         "data_dir: no default (STATE_DIRECTORY, "
+		         "XDG_STATE_HOME and HOME are unset): set data_dir");
 		return -1;
 	}
 	if (strlen(c->listen_unix) >= sizeof(sun.sun_path)) {
-		fail(msg, msglen,
-		     "listen_unix: '%s' is longer than a Unix socket path may "
-		     "be "
-		     "(%zu bytes): set listen_unix to a shorter path, or none",
-		     c->listen_unix, sizeof(sun.sun_path) - 1);
+		srv_fail(msg, msglen,
+		         "listen_unix: '%s' is longer than a Unix socket path "
+		         "may be (%zu bytes): set listen_unix to a shorter "
+		         "path, or none",
+		         c->listen_unix, sizeof(sun.sun_path) - 1);
 		return -1;
 	}
 	if (c->require_token && !c->token_file[0]) {
-		fail(msg, msglen,
-		     "require_token is set but token_file is none");
+		srv_fail(msg, msglen,
+		         "require_token is set but token_file is none");
 		return -1;
 	}
 	if (!c->listen_tcp[0] && !c->listen_unix[0]) {
-		fail(msg, msglen,
-		     "listen_tcp and listen_unix are both none: clients could "
-		     "not connect");
+		srv_fail(msg, msglen,
+		         "listen_tcp and listen_unix are both none: clients "
+		         "could not connect");
 		return -1;
 	}
 	return 0;
@@ -835,11 +784,11 @@ static void getopt_error(int r, int argc, char **argv, char *msg, size_t msglen)
 	const char *arg =
 	        optind >= 1 && optind - 1 < argc ? argv[optind - 1] : "?";
 	if (r == ':')
-		fail(msg, msglen, "option '%s' needs a value", arg);
+		srv_fail(msg, msglen, "option '%s' needs a value", arg);
 	else if (optopt && strncmp(arg, "--", 2) != 0)
-		fail(msg, msglen, "unknown option '-%c'", optopt);
+		srv_fail(msg, msglen, "unknown option '-%c'", optopt);
 	else
-		fail(msg, msglen, "unknown or ambiguous option '%s'", arg);
+		srv_fail(msg, msglen, "unknown or ambiguous option '%s'", arg);
 }
 
 /*
@@ -879,17 +828,17 @@ static int args_pass(srv_config *c, int pass, int argc, char **argv,
 			char why[600];
 			const char *v = optarg ? optarg : "yes";
 			if (set_value(c, k, v, why, sizeof(why)) < 0) {
-				fail(msg, msglen, "--%s: %s",
-				     lo[r - OPT_KEY].name, why);
+				srv_fail(msg, msglen, "--%s: %s",
+				         lo[r - OPT_KEY].name, why);
 				return -1;
 			}
 		}
 	}
 	if (optind < argc) {
-		fail(msg, msglen,
-		     "unexpected argument '%s' (boolean flags take a value as "
-		     "--flag=value)",
-		     argv[optind]);
+		srv_fail(msg, msglen,
+		         "unexpected argument '%s' (boolean flags take a value "
+		         "as --flag=value)",
+		         argv[optind]);
 		return -1;
 	}
 	return 0;

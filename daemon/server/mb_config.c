@@ -5,6 +5,7 @@
  * MB_CONFIG_KEYS in modbus.h.
  */
 #include "modbus.h"
+#include "textutil.h"
 
 #include <errno.h>
 #include <math.h>
@@ -41,18 +42,6 @@ static const mb_config_key docs[] = {
         MB_CONFIG_KEYS(DOC_)
 #undef DOC_
 };
-
-__attribute__((format(printf, 3, 4))) static int fail(char *msg, size_t len,
-                                                      const char *fmt, ...)
-{
-	if (msg && len) {
-		va_list ap;
-		va_start(ap, fmt);
-		vsnprintf(msg, len, fmt, ap);
-		va_end(ap);
-	}
-	return -1;
-}
 
 const mb_config_key *mb_config_keys(size_t *n)
 {
@@ -96,57 +85,36 @@ int mb_listen_parse(const char *s, char *host, size_t hostlen, int *port,
 	if (s[0] == '[') { /* [v6]:port */
 		const char *rb = strchr(s, ']');
 		if (!rb || rb[1] != ':')
-			return fail(msg, len, "'%s' is not [IPV6]:PORT", s);
+			return srv_fail(msg, len, "'%s' is not [IPV6]:PORT", s);
 		h = s + 1;
 		hl = (size_t)(rb - h);
 		colon = rb + 1;
 	} else {
 		colon = strrchr(s, ':');
 		if (!colon || memchr(s, ':', (size_t)(colon - s)))
-			return fail(msg, len,
-			            "'%s' is not HOST:PORT (127.0.0.1:1502, "
-			            "[::1]:1502) or none",
-			            s);
+			return srv_fail(
+			        msg, len,
+			        "'%s' is not HOST:PORT (127.0.0.1:1502, "
+			        "[::1]:1502) or none",
+			        s);
 		hl = (size_t)(colon - s);
 	}
 	if (hl == 0 || hl >= hostlen)
-		return fail(msg, len, "'%s': %s host", s,
-		            hl ? "too long a" : "no");
+		return srv_fail(msg, len, "'%s': %s host", s,
+		                hl ? "too long a" : "no");
 	for (size_t i = 0; i < hl; i++)
 		if (h[i] <= ' ' || h[i] == '/' || h[i] == '[' || h[i] == ']')
-			return fail(msg, len, "'%s': bad character in host", s);
+			return srv_fail(msg, len, "'%s': bad character in host",
+			                s);
 	char *end;
 	errno = 0;
 	long p = strtol(colon + 1, &end, 10);
 	if (colon[1] < '0' || colon[1] > '9' || *end || errno || p > 65535)
-		return fail(msg, len, "'%s': port must be 0..65535", s);
+		return srv_fail(msg, len, "'%s': port must be 0..65535", s);
 	memcpy(host, h, hl);
 	host[hl] = '\0';
 	*port = (int)p;
 	return 0;
-}
-
-/* "2", "2s", "250ms", "1.5m", "1h": seconds.  -1 if malformed. */
-static int parse_seconds(const char *v, double *out)
-{
-	char *end;
-	if ((*v < '0' || *v > '9') && *v != '.')
-		return -1;
-	errno = 0;
-	double x = strtod(v, &end);
-	if (errno || !isfinite(x) || end == v)
-		return -1;
-	static const struct {
-		const char *suffix;
-		double mult;
-	} units[] = {{"", 1},   {"s", 1},    {"ms", 0.001},
-	             {"m", 60}, {"min", 60}, {"h", 3600}};
-	for (size_t i = 0; i < sizeof units / sizeof units[0]; i++)
-		if (strcmp(end, units[i].suffix) == 0) {
-			*out = x * units[i].mult;
-			return 0;
-		}
-	return -1;
 }
 
 static int set_number(mb_config *c, const kdef *k, const char *v, char *msg,
@@ -158,24 +126,25 @@ static int set_number(mb_config *c, const kdef *k, const char *v, char *msg,
 		errno = 0;
 		long n = strtol(v, &end, 10);
 		if (end == v || *end || errno)
-			return fail(msg, len, "%s: '%s' is not an integer",
-			            k->doc.name, v);
+			return srv_fail(msg, len, "%s: '%s' is not an integer",
+			                k->doc.name, v);
 		x = (double)n;
 	} else if (k->type == K_REAL) {
 		errno = 0;
 		x = strtod(v, &end);
 		if (end == v || *end || errno || !isfinite(x))
-			return fail(msg, len, "%s: '%s' is not a number",
-			            k->doc.name, v);
-	} else if (parse_seconds(v, &x) < 0) {
-		return fail(msg, len,
-		            "%s: '%s' is not a duration (30, 30s, 250ms, 5m, "
-		            "1h)",
-		            k->doc.name, v);
+			return srv_fail(msg, len, "%s: '%s' is not a number",
+			                k->doc.name, v);
+	} else if (srv_parse_seconds(v, &x) < 0) {
+		return srv_fail(
+		        msg, len,
+		        "%s: '%s' is not a duration (30, 30s, 250ms, 5m, "
+		        "1h)",
+		        k->doc.name, v);
 	}
 	if (!(x >= k->lo && x <= k->hi))
-		return fail(msg, len, "%s: %s is out of range %g..%g",
-		            k->doc.name, v, k->lo, k->hi);
+		return srv_fail(msg, len, "%s: %s is out of range %g..%g",
+		                k->doc.name, v, k->lo, k->hi);
 	if (k->type == K_INT)
 		*(int *)p = (int)x;
 	else
@@ -188,14 +157,14 @@ int mb_config_set(mb_config *c, const char *key, const char *value, char *msg,
 {
 	const kdef *k = find(key);
 	if (!k)
-		return fail(msg, len, "unknown Modbus key '%s'", key);
+		return srv_fail(msg, len, "unknown Modbus key '%s'", key);
 	if (k->type == K_LISTEN) {
 		char host[sizeof c->listen];
 		int port;
 		char why[300];
 		if (mb_listen_parse(value, host, sizeof host, &port, why,
 		                    sizeof why) < 0)
-			return fail(msg, len, "%s: %s", key, why);
+			return srv_fail(msg, len, "%s: %s", key, why);
 		if (!host[0])
 			c->listen[0] = '\0';
 		else
@@ -204,8 +173,9 @@ int mb_config_set(mb_config *c, const char *key, const char *value, char *msg,
 	}
 	if (k->type == K_ORDER) {
 		if (mb_word_order_parse(value, &c->word_order) < 0)
-			return fail(msg, len, "%s: '%s' is not abcd or cdab",
-			            key, value);
+			return srv_fail(msg, len,
+			                "%s: '%s' is not abcd or cdab", key,
+			                value);
 		return 0;
 	}
 	return set_number(c, k, value, msg, len);

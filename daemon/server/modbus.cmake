@@ -1,5 +1,6 @@
 # luxrad_modbus: the Modbus TCP server of luxradd (issue 5) -- modbus.c,
-# mb_image.c, mb_config.c, regmap.c; the map is documented in MODBUS.md.
+# mb_image.c, mb_config.c, regmap.c (and textutil.c, shared with the
+# daemon's other parsers); the map is documented in MODBUS.md.
 #
 # Included by daemon/server/CMakeLists.txt (include(modbus.cmake)), or by
 # tests/modbus when that line is not there yet.  libmodbus is linked
@@ -11,7 +12,8 @@ add_library(luxrad_modbus STATIC
   ${CMAKE_CURRENT_LIST_DIR}/modbus.c
   ${CMAKE_CURRENT_LIST_DIR}/mb_image.c
   ${CMAKE_CURRENT_LIST_DIR}/mb_config.c
-  ${CMAKE_CURRENT_LIST_DIR}/regmap.c)
+  ${CMAKE_CURRENT_LIST_DIR}/regmap.c
+  ${CMAKE_CURRENT_LIST_DIR}/textutil.c)
 target_include_directories(luxrad_modbus PUBLIC ${CMAKE_CURRENT_LIST_DIR})
 target_link_libraries(luxrad_modbus PRIVATE PkgConfig::LIBMODBUS
                       PUBLIC Threads::Threads m)

@@ -38,6 +38,7 @@
  * Not thread-safe: one caller at a time (the daemon holds its lock).
  */
 #include "store.h"
+#include "textutil.h"
 
 #include <dirent.h>
 #include <errno.h>
@@ -176,18 +177,6 @@ const char *srv_store_repairs(const srv_store *st)
 	return st->repairs;
 }
 
-static void fail(char *msg, size_t msglen, const char *fmt, ...)
-        __attribute__((format(printf, 3, 4)));
-static void fail(char *msg, size_t msglen, const char *fmt, ...)
-{
-	va_list ap;
-	if (!msg || !msglen)
-		return;
-	va_start(ap, fmt);
-	vsnprintf(msg, msglen, fmt, ap);
-	va_end(ap);
-}
-
 static void note_repair(srv_store *st, const char *fmt, ...)
         __attribute__((format(printf, 2, 3)));
 static void note_repair(srv_store *st, const char *fmt, ...)
@@ -230,8 +219,8 @@ static int fsync_dir(const char *dir, char *msg, size_t msglen)
 {
 	int fd = open(dir, O_RDONLY | O_DIRECTORY | O_CLOEXEC);
 	if (fd < 0 || fsync(fd) < 0) {
-		fail(msg, msglen, "%s: cannot sync directory: %s", dir,
-		     strerror(errno));
+		srv_fail(msg, msglen, "%s: cannot sync directory: %s", dir,
+		         strerror(errno));
 		if (fd >= 0)
 			close(fd);
 		return -1;
@@ -251,8 +240,8 @@ static int tmp_write(const char *dir, const void *buf, size_t len, char *tmp,
 	snprintf(tmp, PATHLEN, "%s/.XXXXXX.tmp", dir);
 	int fd = mkostemps(tmp, 4, O_CLOEXEC);
 	if (fd < 0) {
-		fail(msg, msglen, "%s: cannot create a temporary file: %s", dir,
-		     strerror(errno));
+		srv_fail(msg, msglen, "%s: cannot create a temporary file: %s",
+		         dir, strerror(errno));
 		return -1;
 	}
 	while (len > 0) {
@@ -272,8 +261,8 @@ static int tmp_write(const char *dir, const void *buf, size_t len, char *tmp,
 	}
 	return 0;
 bad:
-	fail(msg, msglen, "%s: cannot write: %s", tmp,
-	     errno ? strerror(errno) : "short write");
+	srv_fail(msg, msglen, "%s: cannot write: %s", tmp,
+	         errno ? strerror(errno) : "short write");
 	if (fd >= 0)
 		close(fd);
 	unlink(tmp);
@@ -285,8 +274,8 @@ static int tmp_commit(const char *tmp, const char *path, const char *dir,
                       char *msg, size_t msglen)
 {
 	if (rename(tmp, path) < 0) {
-		fail(msg, msglen, "cannot rename %s to %s: %s", tmp, path,
-		     strerror(errno));
+		srv_fail(msg, msglen, "cannot rename %s to %s: %s", tmp, path,
+		         strerror(errno));
 		unlink(tmp);
 		return -1;
 	}
@@ -300,22 +289,24 @@ static int file_read(const char *path, uint64_t expect, unsigned char **out,
 	int fd = open(path, O_RDONLY | O_CLOEXEC);
 	struct stat sb;
 	if (fd < 0 || fstat(fd, &sb) < 0) {
-		fail(msg, msglen, "%s: cannot open: %s", path, strerror(errno));
+		srv_fail(msg, msglen, "%s: cannot open: %s", path,
+		         strerror(errno));
 		if (fd >= 0)
 			close(fd);
 		return -1;
 	}
 	if ((uint64_t)sb.st_size != expect) {
-		fail(msg, msglen, "%s: %lld bytes, the store recorded %llu",
-		     path, (long long)sb.st_size, (unsigned long long)expect);
+		srv_fail(msg, msglen, "%s: %lld bytes, the store recorded %llu",
+		         path, (long long)sb.st_size,
+		         (unsigned long long)expect);
 		close(fd);
 		return -1;
 	}
 	unsigned char *buf = malloc(expect ? (size_t)expect : 1);
 	size_t got = 0;
 	if (!buf) {
-		fail(msg, msglen, "%s: out of memory for %llu bytes", path,
-		     (unsigned long long)expect);
+		srv_fail(msg, msglen, "%s: out of memory for %llu bytes", path,
+		         (unsigned long long)expect);
 		close(fd);
 		return -1;
 	}
@@ -324,8 +315,8 @@ static int file_read(const char *path, uint64_t expect, unsigned char **out,
 		if (n < 0 && errno == EINTR)
 			continue;
 		if (n <= 0) {
-			fail(msg, msglen, "%s: read failed: %s", path,
-			     n < 0 ? strerror(errno) : "file shrank");
+			srv_fail(msg, msglen, "%s: read failed: %s", path,
+			         n < 0 ? strerror(errno) : "file shrank");
 			free(buf);
 			close(fd);
 			return -1;
@@ -342,8 +333,8 @@ static int file_read(const char *path, uint64_t expect, unsigned char **out,
 
 static int sql_fail(srv_store *st, const char *what, char *msg, size_t msglen)
 {
-	fail(msg, msglen, "%s: %s: %s", st->db_path, what,
-	     sqlite3_errmsg(st->db));
+	srv_fail(msg, msglen, "%s: %s: %s", st->db_path, what,
+	         sqlite3_errmsg(st->db));
 	return -1;
 }
 
@@ -421,23 +412,22 @@ static int make_dirs(const char *path, char *msg, size_t msglen)
 	char buf[PATHLEN];
 	struct stat sb;
 	if (snprintf(buf, sizeof(buf), "%s", path) >= (int)sizeof(buf))
-		return fail(msg, msglen, "%s: path too long", path), -1;
+		return srv_fail(msg, msglen, "%s: path too long", path);
 	for (char *p = buf + 1;; p++) {
 		if (*p != '/' && *p != '\0')
 			continue;
 		char c = *p;
 		*p = '\0';
 		if (mkdir(buf, 0700) < 0 && errno != EEXIST)
-			return fail(msg, msglen,
-			            "cannot create directory %s: %s", buf,
-			            strerror(errno)),
-			       -1;
+			return srv_fail(msg, msglen,
+			                "cannot create directory %s: %s", buf,
+			                strerror(errno));
 		*p = c;
 		if (c == '\0')
 			break;
 	}
 	if (stat(path, &sb) < 0 || !S_ISDIR(sb.st_mode))
-		return fail(msg, msglen, "%s: not a directory", path), -1;
+		return srv_fail(msg, msglen, "%s: not a directory", path);
 	return 0;
 }
 
@@ -447,15 +437,13 @@ static int take_lock(srv_store *st, char *msg, size_t msglen)
 	snprintf(path, sizeof(path), "%s/store.lock", st->dir);
 	st->lock_fd = open(path, O_RDWR | O_CREAT | O_CLOEXEC, 0600);
 	if (st->lock_fd < 0)
-		return fail(msg, msglen, "%s: cannot open: %s", path,
-		            strerror(errno)),
-		       -1;
+		return srv_fail(msg, msglen, "%s: cannot open: %s", path,
+		                strerror(errno));
 	if (flock(st->lock_fd, LOCK_EX | LOCK_NB) < 0)
-		return fail(msg, msglen,
-		            "%s: %s (is another luxradd using %s?)", path,
-		            errno == EWOULDBLOCK ? "locked" : strerror(errno),
-		            st->dir),
-		       -1;
+		return srv_fail(
+		        msg, msglen, "%s: %s (is another luxradd using %s?)",
+		        path, errno == EWOULDBLOCK ? "locked" : strerror(errno),
+		        st->dir);
 	return 0;
 }
 
@@ -490,27 +478,25 @@ static int open_db(srv_store *st, char *msg, size_t msglen)
 	    0)
 		return -1;
 	if (strcmp(v, "wal") != 0)
-		return fail(msg, msglen, "%s: cannot use WAL mode (got '%s')",
-		            st->db_path, v),
-		       -1;
+		return srv_fail(msg, msglen,
+		                "%s: cannot use WAL mode (got '%s')",
+		                st->db_path, v);
 	if (pragma(st, "PRAGMA synchronous = FULL", NULL, 0, msg, msglen) < 0 ||
 	    pragma(st, "PRAGMA foreign_keys = ON", NULL, 0, msg, msglen) < 0)
 		return -1;
 	if (pragma(st, "PRAGMA quick_check", v, sizeof(v), msg, msglen) < 0)
 		return -1;
 	if (strcmp(v, "ok") != 0)
-		return fail(msg, msglen, "%s: database is damaged: %s",
-		            st->db_path, v),
-		       -1;
+		return srv_fail(msg, msglen, "%s: database is damaged: %s",
+		                st->db_path, v);
 	if (pragma(st, "PRAGMA user_version", v, sizeof(v), msg, msglen) < 0)
 		return -1;
 	long ver = strtol(v, NULL, 10);
 	if (ver > SCHEMA_VERSION)
-		return fail(msg, msglen,
-		            "%s: schema version %ld is newer than this "
-		            "luxradd's (%d)",
-		            st->db_path, ver, SCHEMA_VERSION),
-		       -1;
+		return srv_fail(msg, msglen,
+		                "%s: schema version %ld is newer than this "
+		                "luxradd's (%d)",
+		                st->db_path, ver, SCHEMA_VERSION);
 	if (ver < SCHEMA_VERSION) {
 		char *err = NULL;
 		if (sqlite3_exec(st->db, "BEGIN", NULL, NULL, NULL) !=
@@ -521,11 +507,11 @@ static int open_db(srv_store *st, char *msg, size_t msglen)
 		            SQLITE_OK ||
 		    sqlite3_exec(st->db, "COMMIT", NULL, NULL, NULL) !=
 		            SQLITE_OK) {
-			fail(msg, msglen,
-			     "%s: cannot bring the schema from version %ld "
-			     "to %d: %s",
-			     st->db_path, ver, SCHEMA_VERSION,
-			     err ? err : sqlite3_errmsg(st->db));
+			srv_fail(msg, msglen,
+			         "%s: cannot bring the schema from version %ld "
+			         "to %d: %s",
+			         st->db_path, ver, SCHEMA_VERSION,
+			         err ? err : sqlite3_errmsg(st->db));
 			sqlite3_free(err);
 			sqlite3_exec(st->db, "ROLLBACK", NULL, NULL, NULL);
 			return -1;
@@ -597,9 +583,8 @@ static int sweep_dir(srv_store *st, int results, char *msg, size_t msglen)
 	struct dirent *e;
 	int removed = 0, rc = 0;
 	if (!d)
-		return fail(msg, msglen, "%s: cannot list: %s", dir,
-		            strerror(errno)),
-		       -1;
+		return srv_fail(msg, msglen, "%s: cannot list: %s", dir,
+		                strerror(errno));
 	while ((e = readdir(d)) != NULL) {
 		int keep = ends_with(e->d_name, ".tmp")
 		                   ? 0
@@ -613,8 +598,8 @@ static int sweep_dir(srv_store *st, int results, char *msg, size_t msglen)
 			continue;
 		snprintf(path, sizeof(path), "%s/%s", dir, e->d_name);
 		if (unlink(path) < 0) {
-			fail(msg, msglen, "%s: cannot remove: %s", path,
-			     strerror(errno));
+			srv_fail(msg, msglen, "%s: cannot remove: %s", path,
+			         strerror(errno));
 			rc = -1;
 			break;
 		}
@@ -693,7 +678,7 @@ static int check_results(srv_store *st, char *msg, size_t msglen)
 			if (!(nb = realloc(bad, cap * sizeof(*bad)))) {
 				free(bad);
 				sqlite3_reset(s);
-				return fail(msg, msglen, "out of memory"), -1;
+				return srv_fail(msg, msglen, "out of memory");
 			}
 			bad = nb;
 		}
@@ -756,15 +741,15 @@ srv_store *srv_store_open(const char *data_dir, char *msg, size_t msglen)
 	srv_store *st = calloc(1, sizeof(*st));
 	char sub[PATHLEN];
 	if (!st)
-		return fail(msg, msglen, "out of memory"), NULL;
+		return srv_fail(msg, msglen, "out of memory"), NULL;
 	st->lock_fd = -1;
 	if (!data_dir || !data_dir[0]) {
-		fail(msg, msglen, "no data directory given");
+		srv_fail(msg, msglen, "no data directory given");
 		goto bad;
 	}
 	if (snprintf(st->dir, sizeof(st->dir), "%s", data_dir) >=
 	    (int)sizeof(st->dir) - 64) {
-		fail(msg, msglen, "%s: path too long", data_dir);
+		srv_fail(msg, msglen, "%s: path too long", data_dir);
 		goto bad;
 	}
 	if (make_dirs(st->dir, msg, msglen) < 0 || take_lock(st, msg, msglen))
@@ -804,9 +789,9 @@ static int check_name(const char *what, const char *name, char *msg,
 {
 	size_t n = name ? strlen(name) : 0;
 	if (n >= sizeof(((srv_scene_row *)0)->name))
-		return fail(msg, msglen, "%s name is %zu bytes, at most %zu",
-		            what, n, sizeof(((srv_scene_row *)0)->name) - 1),
-		       -1;
+		return srv_fail(msg, msglen,
+		                "%s name is %zu bytes, at most %zu", what, n,
+		                sizeof(((srv_scene_row *)0)->name) - 1);
 	return 0;
 }
 
@@ -859,8 +844,8 @@ static int scene_size(srv_store *st, uint64_t id, uint64_t *bytes, char *msg,
 		*bytes = (uint64_t)sqlite3_column_int64(s, 0);
 	sqlite3_reset(s);
 	if (rc == SQLITE_DONE)
-		return fail(msg, msglen, "scene %llu not found",
-		            (unsigned long long)id),
+		return srv_fail(msg, msglen, "scene %llu not found",
+		                (unsigned long long)id),
 		       0;
 	return rc == SQLITE_ROW ? 1 : sql_fail(st, "scene read", msg, msglen);
 }
@@ -890,12 +875,11 @@ int srv_store_scene_delete(srv_store *st, uint64_t id, char *msg, size_t msglen)
 	if (rc != SQLITE_ROW)
 		return sql_fail(st, "scene delete", msg, msglen);
 	if (jobs > 0)
-		return fail(msg, msglen,
-		            "scene %llu is used by %lld job%s: delete them "
-		            "first",
-		            (unsigned long long)id, (long long)jobs,
-		            jobs > 1 ? "s" : ""),
-		       -1;
+		return srv_fail(
+		        msg, msglen,
+		        "scene %llu is used by %lld job%s: delete them first",
+		        (unsigned long long)id, (long long)jobs,
+		        jobs > 1 ? "s" : "");
 	s = stmt(st, ST_SCENE_DELETE);
 	sqlite3_bind_int64(s, 1, sql_id(id));
 	if (run(st, s, "scene delete", msg, msglen) < 0)
@@ -904,9 +888,8 @@ int srv_store_scene_delete(srv_store *st, uint64_t id, char *msg, size_t msglen)
 	 * file that open() removes, never a row without its file. */
 	scene_path(st, id, path);
 	if (unlink(path) < 0 && errno != ENOENT)
-		return fail(msg, msglen, "%s: cannot remove: %s", path,
-		            strerror(errno)),
-		       -1;
+		return srv_fail(msg, msglen, "%s: cannot remove: %s", path,
+		                strerror(errno));
 	return 0;
 }
 
@@ -936,9 +919,8 @@ int srv_store_job_add(srv_store *st, srv_job_row *row, char *msg, size_t msglen)
 	if (check_name("job", row->name, msg, msglen) < 0)
 		return -1;
 	if ((unsigned)row->state >= SRV_JOB_NSTATES)
-		return fail(msg, msglen, "job state %d is not a state",
-		            (int)row->state),
-		       -1;
+		return srv_fail(msg, msglen, "job state %d is not a state",
+		                (int)row->state);
 	double t = now_s();
 	if (row->created <= 0)
 		row->created = t;
@@ -959,9 +941,8 @@ int srv_store_job_add(srv_store *st, srv_job_row *row, char *msg, size_t msglen)
 	int rc = sqlite3_step(s);
 	sqlite3_reset(s);
 	if ((rc & 0xff) == SQLITE_CONSTRAINT)
-		return fail(msg, msglen, "job: scene %llu not found",
-		            (unsigned long long)row->scene_id),
-		       -1;
+		return srv_fail(msg, msglen, "job: scene %llu not found",
+		                (unsigned long long)row->scene_id);
 	if (rc != SQLITE_DONE)
 		return sql_fail(st, "job insert", msg, msglen);
 	row->id = (uint64_t)sqlite3_last_insert_rowid(st->db);
@@ -986,17 +967,15 @@ int srv_store_job_update(srv_store *st, const srv_job_row *row, char *msg,
                          size_t msglen)
 {
 	if ((unsigned)row->state >= SRV_JOB_NSTATES)
-		return fail(msg, msglen, "job state %d is not a state",
-		            (int)row->state),
-		       -1;
+		return srv_fail(msg, msglen, "job state %d is not a state",
+		                (int)row->state);
 	sqlite3_stmt *s = stmt(st, ST_JOB_UPDATE);
 	bind_job_update(s, row);
 	if (run(st, s, "job update", msg, msglen) < 0)
 		return -1;
 	if (sqlite3_changes(st->db) == 0)
-		return fail(msg, msglen, "job %llu not found",
-		            (unsigned long long)row->id),
-		       -1;
+		return srv_fail(msg, msglen, "job %llu not found",
+		                (unsigned long long)row->id);
 	return 0;
 }
 
@@ -1014,8 +993,8 @@ static int job_result(srv_store *st, uint64_t id, int *has, int64_t *gen,
 	}
 	sqlite3_reset(s);
 	if (rc == SQLITE_DONE)
-		return fail(msg, msglen, "job %llu not found",
-		            (unsigned long long)id),
+		return srv_fail(msg, msglen, "job %llu not found",
+		                (unsigned long long)id),
 		       0;
 	return rc == SQLITE_ROW ? 1 : sql_fail(st, "job read", msg, msglen);
 }
@@ -1029,9 +1008,8 @@ int srv_store_job_checkpoint(srv_store *st, const srv_job_row *row,
 	int64_t gen;
 	uint64_t oldlen;
 	if ((unsigned)row->state >= SRV_JOB_NSTATES)
-		return fail(msg, msglen, "job state %d is not a state",
-		            (int)row->state),
-		       -1;
+		return srv_fail(msg, msglen, "job state %d is not a state",
+		                (int)row->state);
 	if (job_result(st, row->id, &has, &gen, &oldlen, msg, msglen) <= 0)
 		return -1;
 	snprintf(dir, sizeof(dir), "%s/results", st->dir);
@@ -1065,9 +1043,8 @@ int srv_store_job_result_read(srv_store *st, uint64_t id, unsigned char **bytes,
 	if (job_result(st, id, &has, &gen, &size, msg, msglen) <= 0)
 		return -1;
 	if (!has)
-		return fail(msg, msglen, "job %llu has no checkpoint",
-		            (unsigned long long)id),
-		       -1;
+		return srv_fail(msg, msglen, "job %llu has no checkpoint",
+		                (unsigned long long)id);
 	result_path(st, id, gen, path);
 	return file_read(path, size, bytes, len, msg, msglen);
 }
@@ -1086,9 +1063,8 @@ int srv_store_job_delete(srv_store *st, uint64_t id, char *msg, size_t msglen)
 		return -1;
 	result_path(st, id, gen, path);
 	if (has && unlink(path) < 0 && errno != ENOENT)
-		return fail(msg, msglen, "%s: cannot remove: %s", path,
-		            strerror(errno)),
-		       -1;
+		return srv_fail(msg, msglen, "%s: cannot remove: %s", path,
+		                strerror(errno));
 	return 0;
 }
 
@@ -1134,7 +1110,7 @@ int srv_store_job_list(srv_store *st,
 		srv_job_row r;
 		if (job_from_row(s, &r) < 0) {
 			sqlite3_reset(s);
-			return fail(msg, msglen, "job list: out of memory"), -1;
+			return srv_fail(msg, msglen, "job list: out of memory");
 		}
 		fn(ud, &r);
 		srv_job_row_clear(&r);
