@@ -65,9 +65,9 @@ static json_t *reply_base(query_task *q)
 	return reply;
 }
 
-static json_t *run_points(query_task *q, double *lux, rad_error *err)
+static json_t *run_points(srv *s, query_task *q, double *lux, rad_error *err)
 {
-	if (rad_solution_illuminance(q->sol->sol, q->pts, q->n, lux, err) !=
+	if (srv_query_illuminance(s, q->sol->sol, q->pts, q->n, lux, err) !=
 	    RAD_OK)
 		return NULL;
 	json_t *reply = reply_base(q), *arr = json_array();
@@ -77,9 +77,9 @@ static json_t *run_points(query_task *q, double *lux, rad_error *err)
 	return reply;
 }
 
-static json_t *run_grid(query_task *q, double *lux, rad_error *err)
+static json_t *run_grid(srv *s, query_task *q, double *lux, rad_error *err)
 {
-	if (rad_solution_illuminance(q->sol->sol, q->pts, q->n, lux, err) !=
+	if (srv_query_illuminance(s, q->sol->sol, q->pts, q->n, lux, err) !=
 	    RAD_OK)
 		return NULL;
 	json_t *reply = reply_base(q), *arr = json_array();
@@ -208,7 +208,6 @@ static void query_run(srv *s, srv_task *t)
 	rad_error err = {0};
 	json_t *reply = NULL;
 	double *lux = NULL;
-	(void)s;
 
 	if (q->kind == Q_POINTS || q->kind == Q_GRID) {
 		lux = malloc((q->n ? q->n : 1) * sizeof(double));
@@ -219,9 +218,9 @@ static void query_run(srv *s, srv_task *t)
 		}
 	}
 	if (q->kind == Q_POINTS && lux)
-		reply = run_points(q, lux, &err);
+		reply = run_points(s, q, lux, &err);
 	else if (q->kind == Q_GRID && lux)
-		reply = run_grid(q, lux, &err);
+		reply = run_grid(s, q, lux, &err);
 	else if (q->kind == Q_SURFACES)
 		reply = run_surfaces(q, &err);
 	else if (q->kind == Q_EXPORT)

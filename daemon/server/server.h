@@ -14,6 +14,7 @@
  *   job.c      job state machine and the solver worker threads
  *   publish.c  events to subscribers, subscriptions, the drop policy
  *   query.c    query.* and export, run on the query threads
+ *   qsplit.c   one query's points shared out among the query threads
  *   pool.c     thread pools for tasks, the inbox back to the I/O thread
  *   persist.c  job rows and checkpoints in the store
  *   recover.c  startup from the store
@@ -451,6 +452,13 @@ cmd_result srv_cmd_query_points(srv_req *r);
 cmd_result srv_cmd_query_grid(srv_req *r);
 cmd_result srv_cmd_query_surfaces(srv_req *r);
 cmd_result srv_cmd_export(srv_req *r);
+/*
+ * rad_solution_illuminance for one query, spread over the query threads
+ * (qsplit.c); call from a query-pool task.  Same values as one call.
+ */
+rad_status srv_query_illuminance(srv *s, const rad_solution *sol,
+                                 const double *pts, size_t n, double *lux,
+                                 rad_error *err);
 
 /* Persist a job's row on the store thread, then send reply (stolen);
  * returns CMD_DEFERRED (or CMD_ERROR with r->err filled). */

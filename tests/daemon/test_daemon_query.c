@@ -270,6 +270,43 @@ static void test_query_points_equal_luxrad_solve(void **state)
 	dm_pass();
 }
 
+/*
+ * A big query.points is shared out among the query threads in chunks
+ * (qsplit.c): its values must be those of the same points asked a few at
+ * a time (below one chunk, so each on one thread), to the last bit.
+ */
+static void test_split_query_equals_small_queries(void **state)
+{
+	(void)state;
+	const char *args[] = {"--query-threads", "3", NULL};
+	dm_daemon *d = dm_start(args);
+	dm_conn *c = dm_open(d, NULL);
+	json_t *sc = NULL;
+	json_t *job = dm_solve_sample(c, "office.gltf", &sc);
+	enum { N = 203, SMALL = 7 }; /* 7 chunks of 32, the last short */
+	static double pts[N * 6], big[N], small[N];
+	for (int i = 0; i < N; i++) {
+		double *p = pts + 6 * i;
+		p[0] = 0.1 + 3.8 * (i % 29) / 28.0;
+		p[1] = i % 3 == 0 ? 0.0 : 0.75;
+		p[2] = 0.1 + 2.8 * (i / 29) / 6.0;
+		p[3] = p[5] = 0, p[4] = 1;
+	}
+	dm_query_points(c, job, pts, N, big);
+	for (int i = 0; i < N; i += SMALL)
+		dm_query_points(c, job, pts + 6 * i,
+		                (size_t)(N - i < SMALL ? N - i : SMALL),
+		                small + i);
+	for (int i = 0; i < N; i++)
+		if (memcmp(&big[i], &small[i], sizeof(double)) != 0)
+			fail_msg("point %d: %.17g lux in the big query, %.17g "
+			         "asked alone",
+			         i, big[i], small[i]);
+	json_decref(job);
+	json_decref(sc);
+	dm_pass();
+}
+
 /* ---------------------------------------------------------- pipelining */
 
 /*
@@ -553,6 +590,7 @@ int main(void)
 #define T(f) cmocka_unit_test_setup_teardown(f, dm_setup, dm_teardown)
 	        T(test_upload_reports_what_luxrad_solve_reports),
 	        T(test_query_points_equal_luxrad_solve),
+	        T(test_split_query_equals_small_queries),
 	        T(test_pipelined_requests_are_answered_in_order),
 	        T(test_query_grid_cells_spacing_and_uniformity),
 	        T(test_query_surfaces_per_node),
