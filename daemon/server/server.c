@@ -470,6 +470,9 @@ int srv_init(srv *s, const srv_config *cfg, int argc, char **argv, char *msg,
 	s->store = srv_store_open(cfg->data_dir, msg, msglen);
 	if (!s->store)
 		return -1;
+	if (srv_store_repairs(s->store)[0])
+		srv_warn("store %s: %s", cfg->data_dir,
+		         srv_store_repairs(s->store));
 	/* One daemon per data directory. */
 	snprintf(s->lock_path, sizeof(s->lock_path), "%s/luxradd.lock",
 	         cfg->data_dir);

@@ -27,7 +27,8 @@
  *     run it again);
  *   - a scene whose bytes are missing or of the wrong size is removed,
  *     with its jobs (nothing can be solved or queried without it).
- * Each repair is noted in srv_store_repairs() for the daemon's log.
+ * Each repair, and a schema upgrade, is noted in srv_store_repairs() for
+ * the daemon's log.
  * Files in scenes/ and results/ whose names are not ours are left alone.
  *
  * Schema versions: PRAGMA user_version (0 = empty database, 1 = scenes
@@ -516,6 +517,10 @@ static int open_db(srv_store *st, char *msg, size_t msglen)
 			sqlite3_exec(st->db, "ROLLBACK", NULL, NULL, NULL);
 			return -1;
 		}
+		if (ver > 0)
+			note_repair(st,
+			            "schema upgraded from version %ld to %d",
+			            ver, SCHEMA_VERSION);
 	}
 	for (int i = 0; i < ST_COUNT; i++)
 		if (sqlite3_prepare_v3(st->db, stmt_sql[i], -1,

@@ -734,6 +734,8 @@ static void test_schema_1_is_upgraded(void **state)
 	sqlite3_close(db);
 
 	st = open_ok(dir);
+	assert_string_equal(srv_store_repairs(st),
+	                    "schema upgraded from version 1 to 2");
 	scenes_seen sc;
 	jobs_seen jb;
 	list_all(st, &sc, &jb);
