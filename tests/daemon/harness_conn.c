@@ -327,15 +327,23 @@ json_t *dm_call_json(dm_conn *c, json_t *h, const void *payload, size_t len,
 	}
 }
 
+/* The request header from json_pack arguments; fails the test when they
+ * do not pack. */
+static json_t *vpack(const char *fmt, va_list ap)
+{
+	json_error_t je;
+	json_t *h = json_vpack_ex(&je, 0, fmt, ap);
+	if (!h)
+		dm_fail("json_pack '%s': %s", fmt, je.text);
+	return h;
+}
+
 json_t *dm_call(dm_conn *c, const char *fmt, ...)
 {
 	va_list ap;
 	va_start(ap, fmt);
-	json_error_t je;
-	json_t *h = json_vpack_ex(&je, 0, fmt, ap);
+	json_t *h = vpack(fmt, ap);
 	va_end(ap);
-	if (!h)
-		dm_fail("json_pack '%s': %s", fmt, je.text);
 	return dm_call_json(c, h, NULL, 0, dm_reply_ms, 1);
 }
 
@@ -343,11 +351,8 @@ json_t *dm_call_maybe(dm_conn *c, int timeout_ms, const char *fmt, ...)
 {
 	va_list ap;
 	va_start(ap, fmt);
-	json_error_t je;
-	json_t *h = json_vpack_ex(&je, 0, fmt, ap);
+	json_t *h = vpack(fmt, ap);
 	va_end(ap);
-	if (!h)
-		dm_fail("json_pack '%s': %s", fmt, je.text);
 	return dm_call_json(c, h, NULL, 0, timeout_ms, 0);
 }
 
@@ -356,11 +361,8 @@ json_t *dm_call_payload(dm_conn *c, const void *payload, size_t len,
 {
 	va_list ap;
 	va_start(ap, fmt);
-	json_error_t je;
-	json_t *h = json_vpack_ex(&je, 0, fmt, ap);
+	json_t *h = vpack(fmt, ap);
 	va_end(ap);
-	if (!h)
-		dm_fail("json_pack '%s': %s", fmt, je.text);
 	return dm_call_json(c, h, payload, len, dm_reply_ms, 1);
 }
 
@@ -397,11 +399,8 @@ json_t *dm_ok(dm_conn *c, const char *fmt, ...)
 {
 	va_list ap;
 	va_start(ap, fmt);
-	json_error_t je;
-	json_t *h = json_vpack_ex(&je, 0, fmt, ap);
+	json_t *h = vpack(fmt, ap);
 	va_end(ap);
-	if (!h)
-		dm_fail("json_pack '%s': %s", fmt, je.text);
 	char what[64];
 	snprintf(what, sizeof(what), "%s",
 	         json_string_value(json_object_get(h, "cmd")));
@@ -414,11 +413,8 @@ json_t *dm_err(dm_conn *c, const char *code, const char *fmt, ...)
 {
 	va_list ap;
 	va_start(ap, fmt);
-	json_error_t je;
-	json_t *h = json_vpack_ex(&je, 0, fmt, ap);
+	json_t *h = vpack(fmt, ap);
 	va_end(ap);
-	if (!h)
-		dm_fail("json_pack '%s': %s", fmt, je.text);
 	char *req = dm_dumps(h);
 	char reqs[600];
 	snprintf(reqs, sizeof(reqs), "%s", req ? req : "?");
