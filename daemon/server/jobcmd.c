@@ -250,6 +250,25 @@ static int parse_target(srv_req *r, job_target *t)
 	return 0;
 }
 
+/*
+ * Lock j->mu for a command that needs a live job; a done, failed or
+ * cancelled one fails r ("job N is <already><state><why>") and leaves
+ * the mutex unlocked.  Returns 1 when locked.
+ */
+static int lock_live(srv_req *r, srv_job *j, const char *already,
+                     const char *why)
+{
+	pthread_mutex_lock(&j->mu);
+	srv_job_state st = j->state;
+	if (!srv_job_terminal(st))
+		return 1;
+	pthread_mutex_unlock(&j->mu);
+	srv_req_fail(r, RP_ERR_STATE, "job %llu is %s%s%s",
+	             (unsigned long long)j->id, already, srv_job_state_name(st),
+	             why);
+	return 0;
+}
+
 cmd_result srv_cmd_job_run(srv_req *r)
 {
 	int failed;
@@ -257,14 +276,9 @@ cmd_result srv_cmd_job_run(srv_req *r)
 	srv_job *j = srv_req_job(r, &failed);
 	if (failed || parse_target(r, &t) != 0)
 		return CMD_ERROR;
-	pthread_mutex_lock(&j->mu);
+	if (!lock_live(r, j, "", ": nothing to run"))
+		return CMD_ERROR;
 	srv_job_state st = j->state;
-	if (srv_job_terminal(st)) {
-		pthread_mutex_unlock(&j->mu);
-		return srv_req_fail(
-		        r, RP_ERR_STATE, "job %llu is %s: nothing to run",
-		        (unsigned long long)j->id, srv_job_state_name(st));
-	}
 	if (t.mode == JOB_MODE_ITERATIONS) {
 		uint64_t until = (uint64_t)j->iteration + t.n;
 		t.until = until > 0xFFFFFFFFu ? 0xFFFFFFFFu : (uint32_t)until;
@@ -308,14 +322,9 @@ cmd_result srv_cmd_job_pause(srv_req *r)
 	srv_job *j = srv_req_job(r, &failed);
 	if (failed)
 		return CMD_ERROR;
-	pthread_mutex_lock(&j->mu);
+	if (!lock_live(r, j, "", ""))
+		return CMD_ERROR;
 	srv_job_state st = j->state;
-	if (srv_job_terminal(st)) {
-		pthread_mutex_unlock(&j->mu);
-		return srv_req_fail(r, RP_ERR_STATE, "job %llu is %s",
-		                    (unsigned long long)j->id,
-		                    srv_job_state_name(st));
-	}
 	if (j->on_worker) /* running: reply once it has stopped */
 		return stop_worker(r, j, &j->pause_req);
 	if (st == SRV_JOB_QUEUED) {
@@ -361,14 +370,8 @@ cmd_result srv_cmd_job_cancel(srv_req *r)
 	srv_job *j = srv_req_job(r, &failed);
 	if (failed)
 		return CMD_ERROR;
-	pthread_mutex_lock(&j->mu);
-	srv_job_state st = j->state;
-	if (srv_job_terminal(st)) {
-		pthread_mutex_unlock(&j->mu);
-		return srv_req_fail(r, RP_ERR_STATE, "job %llu is already %s",
-		                    (unsigned long long)j->id,
-		                    srv_job_state_name(st));
-	}
+	if (!lock_live(r, j, "already ", ""))
+		return CMD_ERROR;
 	if (j->on_worker)
 		return stop_worker(r, j, &j->cancel_req);
 	j->state = SRV_JOB_CANCELLED;
@@ -394,14 +397,8 @@ cmd_result srv_cmd_job_set(srv_req *r)
 	if (!(eps > 0))
 		return srv_req_fail(r, RP_ERR_INVALID,
 		                    "\"eps\" must be > 0 (got %g)", eps);
-	pthread_mutex_lock(&j->mu);
-	if (srv_job_terminal(j->state)) {
-		srv_job_state st = j->state;
-		pthread_mutex_unlock(&j->mu);
-		return srv_req_fail(r, RP_ERR_STATE, "job %llu is %s",
-		                    (unsigned long long)j->id,
-		                    srv_job_state_name(st));
-	}
+	if (!lock_live(r, j, "", ""))
+		return CMD_ERROR;
 	j->pending_eps = eps;
 	j->has_pending_eps = 1;
 	j->updated = srv_now_unix();
