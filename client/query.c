@@ -44,10 +44,7 @@ int lx_points_load(const char *path, json_t **points, size_t *n)
 	while (rc == LX_EXIT_OK && getline(&line, &cap, f) != -1) {
 		double p[6];
 		const char *why = NULL;
-		char *hash = strchr(line, '#');
 		lineno++;
-		if (hash)
-			*hash = '\0';
 		int r = rp_point_line_parse(line, p, &why);
 		if (r < 0) {
 			fprintf(stderr, "luxrad: %s:%lu: %s\n", path, lineno,

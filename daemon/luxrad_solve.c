@@ -410,10 +410,7 @@ static int load_points(const char *path, point_list *pl)
 	while (rc == EXIT_OKAY && getline(&line, &cap, f) != -1) {
 		double p[6];
 		const char *why = NULL;
-		char *hash = strchr(line, '#');
 		lineno++;
-		if (hash)
-			*hash = '\0';
 		int r = rp_point_line_parse(line, p, &why);
 		if (r < 0) {
 			fprintf(stderr, "luxrad-solve: %s:%lu: %s\n", path,

@@ -264,9 +264,10 @@ int rp_addr_is_loopback(const rp_addr *a);
 /* ------------------------------------------------------------- utilities */
 /*
  * One line of a points file (the format of luxrad --points and
- * luxrad-solve --points), '#' comment already cut: six finite numbers
- * "x y z nx ny nz" separated by blanks, the normal not zero.  Returns 1
- * and fills p for a point, 0 for a blank line, -1 with a reason in *why.
+ * luxrad-solve --points): six finite numbers "x y z nx ny nz" separated
+ * by blanks, the normal not zero; '#' starts a comment to the end of the
+ * line.  Returns 1 and fills p for a point, 0 for a blank or comment
+ * line, -1 with a reason in *why.
  */
 int rp_point_line_parse(const char *line, double p[6], const char **why);
 

@@ -241,7 +241,7 @@ int rp_point_line_parse(const char *line, double p[6], const char **why)
 	for (;;) {
 		while (*s == ' ' || *s == '\t' || *s == '\r' || *s == '\n')
 			s++;
-		if (*s == '\0')
+		if (*s == '\0' || *s == '#') /* end, or a comment */
 			break;
 		if (k == 6) {
 			*why = "more than 6 numbers";
@@ -250,7 +250,7 @@ int rp_point_line_parse(const char *line, double p[6], const char **why)
 		errno = 0;
 		p[k] = strtod(s, &end);
 		if (end == s || !isfinite(p[k]) || errno == ERANGE ||
-		    (*end && !strchr(" \t\r\n", *end))) {
+		    (*end && !strchr(" \t\r\n#", *end))) {
 			*why = "not a finite number";
 			return -1;
 		}

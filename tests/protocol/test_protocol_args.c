@@ -501,6 +501,12 @@ static void test_point_lines(void **state)
 	assert_true(p[0] == 1 && p[2] == 3 && p[4] == 1);
 	assert_int_equal(rp_point_line_parse("   \n", p, &why), 0);
 	assert_int_equal(rp_point_line_parse("", p, &why), 0);
+	assert_int_equal(rp_point_line_parse("  # a comment\n", p, &why), 0);
+	assert_int_equal(rp_point_line_parse("1 2 3 0 1 0# desk", p, &why), 1);
+	assert_true(p[5] == 0 && p[4] == 1);
+	why = NULL;
+	assert_int_equal(rp_point_line_parse("1 2 3 # 0 1 0", p, &why), -1);
+	assert_non_null(why);
 	const char *bad[] = {"1 2 3 0 0 0",  "1 2 3 0 1",     "1 2 3 0 1 0 7",
 	                     "1 2 x 0 1 0",  "1 2 3 0 1 nan", "1 2 3 0 1 1e999",
 	                     "1 2 3,0 1 0 0"};
