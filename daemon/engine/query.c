@@ -1,50 +1,72 @@
 /*
  * query.c -- reading a published solution: illuminance at arbitrary points
- * (rad_solver_illuminance) and the per-leaf results for export
- * (rad_solver_leaves).  Both only read the hierarchy, so they work the same
- * for every solver and may run concurrently with each other.
+ * with an estimate of its error (rad_solver_query, rad_solution_query) and
+ * the per-leaf results for export (rad_solver_leaves).  Both only read the
+ * hierarchy, so they work the same for every solver and may run
+ * concurrently with each other.
  *
  * DESIGN
  * Illuminance at a point x with unit normal n is
  *   direct:  every scene light, exactly at x (rad_light_point, one ray);
  *   surfaces: a hierarchical final gather of the radiosity B published in
  *            the hierarchy, walking down from the root cluster.
- * For each node the walk has an upper bound of what it can give:
- *   cluster: luma(B) A / (pi dmin^2), dmin the distance from x to its box
- *            (every square metre inside radiates at most B / (pi d^2));
- *   element: luma(B) F, F the exact unoccluded point-to-polygon kernel
- *            (rad_ff_point_patch: Lambert's contour integral, clipped to
- *            x's hemisphere, zero for back faces and coplanar polygons).
- * A node is evaluated as a whole when it is far (size < THETA x distance)
- * and its bound is below FRACTION of the total gathered so far (never
- * taken below FLOOR_REL x the scene's mean exitance, so dark points do
- * not descend to every leaf); otherwise the walk descends.  Children are
- * visited nearest first so the running total grows early.  Evaluation:
- *   cluster: isotropic emitter of area A/4 at the box centre, times the
- *            visibility of the centre;
- *   element: exact kernel x visible fraction (visible_ff); surface leaves
- *            are always evaluated this way.  An inner element weights its
- *            four children's radiosity by their own kernels (no extra
- *            rays), so a gradient across it is not averaged away.
- * visible_ff traces VIS_RAYS rays to sample points of the source; when
- * some but not all are blocked and the source is near, it splits the
- * source geometrically into quarters (up to VIS_DEPTH levels) and sums the
- * exact kernel of each visible part.
- *
+ * Every decision is a ratio against one relative tolerance tau
+ * (rad_options.query_tol, set by the accuracy knob) times the point's
+ * total, so results do not depend on the scene's scale, and tightening
+ * tau refines every approximation:
+ *   far field: a node is evaluated as a whole when it is far (size <
+ *     THETA x distance) and an upper bound of what it can give is below
+ *     tau x the running total (never below FLOOR_REL x the scene's mean
+ *     exitance, so dark points do not descend to every leaf); otherwise
+ *     the walk descends.  Bounds: cluster luma(B) A / (pi dmin^2);
+ *     element luma(B) F, F the exact unoccluded point-to-polygon kernel
+ *     (rad_ff_point_patch).  Children are visited nearest first so the
+ *     running total grows early.
+ *   evaluation: cluster: isotropic emitter of area A/4 at the box centre
+ *     times the visibility of the centre; inner element: its four
+ *     children's radiosity weighted by their own kernels (no extra rays)
+ *     times its visible fraction; leaf: B times its visible kernel.
+ *   visibility of a piece of source (a leaf, an element taken whole, an
+ *     emitter): rays to its corners and centroid (trace_piece).  Corners,
+ *     because a straight shadow edge crossing a convex piece always
+ *     leaves corners on both sides: no such edge passes unseen, and a
+ *     fixed ray count settles nothing.  A piece whose rays disagree, or a
+ *     large one whose rays agree, is unsure: it goes to a per-point heap
+ *     ordered by its error.  Once the walk is done and the point's total
+ *     is known (refine), every unsure piece larger than BIG_SHARE x tau x
+ *     total is split once (its quarters checked with their own rays), and
+ *     then the pieces with the largest errors are split into quarters,
+ *     each with its own exact kernel and rays, until the errors left add
+ *     up to less than tau / 2 of the total (or VIS_SPLITS splits, or
+ *     VIS_DEPTH levels).  Judging against the final total, not a running
+ *     one, is what lets the first large source a point meets be resolved
+ *     neither too coarsely nor to the bottom.
  * Emitters come out exact: when the walk reaches the root element of a
  * polygon whose material emits, the uniform part E is evaluated on the
- * whole polygon with the exact kernel, and only the reflected part B - E
- * goes down its quadtree.  Every threshold is a ratio (size/distance,
- * share of the total), so results do not depend on the scene's scale.
+ * whole polygon, and only the reflected part B - E goes down its quadtree.
+ *
+ * Error estimate (error_lux).  Each approximation adds what it may miss:
+ * an unsure piece its binomial error c sqrt(p (1 - p) / k) (c its share,
+ * p its open fraction, k rays), added linearly (along one shadow edge the
+ * errors have one sign); and, added in quadrature as independent errors:
+ * a cluster taken as a whole half its share (one ray, isotropic model),
+ * an inner element taken whole the difference its children's weighting
+ * made (the next level's correction is of that order), a leaf the
+ * difference between its radiosity and its parent's times its visible
+ * kernel (the solution's own resolution there: what a finer mesh would
+ * change).  The solver's convergence estimate (the relative error of B)
+ * times the reflected part is added linearly.  It estimates the error
+ * against the exact solution of the radiosity model; the tests hold it
+ * against closed forms and luxrad-reference.
  *
  * A point lying on a surface sees the side its normal points to: rays
  * leave x with the given normal (rad_vis_segment offsets them), and the
  * polygon under x gets F = 0 from the kernel.  Points are independent and
- * evaluated in parallel, each writing only lux[i]; the walk of one point
- * is sequential, so results are identical for any thread count (a query
- * made while the pool is busy with another runs on its caller's thread).
+ * evaluated in parallel, each writing only its own outputs; the walk of
+ * one point is sequential, so results are identical for any thread count.
  * The walk allocates nothing: C stack only (depth: cluster tree plus
- * quadtree levels).
+ * quadtree levels; the heap of unsure pieces, VIS_HEAP of them, lives in
+ * the point's gather state).
  */
 #include <math.h>
 
@@ -53,24 +75,58 @@
 #include "vis.h"
 
 #define THETA 0.5      /* far enough: size < THETA x distance */
-#define FRACTION 0.01  /* ... and bound < FRACTION x running total */
 #define FLOOR_REL 1e-3 /* running total floor, x scene mean exitance */
-#define VIS_RAYS 4     /* shadow rays to a surface node */
-#define VIS_DEPTH 3    /* geometric splits of a partly visible source */
+#define VIS_DEPTH 10   /* splits of one piece, at most */
+#define VIS_HEAP 256   /* unsure pieces held per point */
+#define VIS_SPLITS 384 /* splits per point, at most */
+#define BIG_SHARE 0.25 /* agreeing pieces above this x tau x total: split */
 #define POINT_GRAIN 4  /* points per parallel chunk */
 #define NOISE_REL 1e-6 /* B - E below this share of E is float noise */
+
+/*
+ * A piece of source whose visible fraction is not settled: w its
+ * radiosity weight (the lux it gives per unit of kernel), F its exact
+ * kernel, est = w F p what it added to the total, e its error estimate.
+ */
+typedef struct piece {
+	rad_patch s;
+	double w, F, est, e;
+	uint8_t depth;
+	uint8_t kind; /* PIECE_* */
+} piece;
+
+enum {
+	PIECE_PARTIAL, /* its rays disagree: a shadow edge crosses it */
+	PIECE_WHOLE,   /* rays agree: only a large top piece is checked */
+};
 
 typedef struct gather {
 	const rad_hier *h;
 	const rad_vis *vis;
-	v3 x, n;      /* the point and its unit normal */
-	double total; /* photopic lux gathered so far */
-	double floor; /* smallest running total used by the far test */
+	v3 x, n;       /* the point and its unit normal */
+	double tau;    /* relative tolerance */
+	double total;  /* photopic lux gathered so far */
+	double floor;  /* smallest running total used by the tests */
+	double err2;   /* sum of squared independent error estimates */
+	double errvis; /* visibility error given up on (heap full, depth) */
+	double direct; /* of total: lights and emission (not reflected) */
+	piece heap[VIS_HEAP]; /* max-heap on e */
+	int nheap;
 } gather;
 
 static double luma_d(const double c[3])
 {
 	return RAD_LUMA_R * c[0] + RAD_LUMA_G * c[1] + RAD_LUMA_B * c[2];
+}
+
+static double running(const gather *g)
+{
+	return fmax(g->total, g->floor);
+}
+
+static void add_error(gather *g, double e)
+{
+	g->err2 += e * e;
 }
 
 /* Quarter a patch the way the quadtree does (the middle triangle of a
@@ -100,44 +156,201 @@ static double patch_size(const rad_patch *p)
 	return fmax(fmax(v3_len(p->e1), v3_len(p->e2)), v3_len(d));
 }
 
-/*
- * F (the exact unoccluded kernel of s at the point) times the visible
- * fraction of s.  Rays go only to sample points in front of the point's
- * tangent plane (the rest of s does not contribute, and a ray there would
- * run under the surface).  A near source seen in part, or straddling the
- * plane with no sample in front, is split into quarters, each with its own
- * exact kernel.
- */
-static double visible_ff(const gather *g, const rad_patch *s, double F,
-                         int depth)
+/* ------------------------------------------------- visibility of pieces */
+
+static void heap_swap(piece *a, piece *b)
 {
-	v3 pts[RAD_FF_MAX_SAMPLES];
-	int np = rad_patch_samples(s, VIS_RAYS, pts), tried = 0, open = 0;
-	for (int k = 0; k < np; k++) {
-		if (!(v3_dot(v3_sub(pts[k], g->x), g->n) > 0))
+	piece t = *a;
+	*a = *b;
+	*b = t;
+}
+
+static void heap_push(gather *g, const piece *pc)
+{
+	if (g->nheap == VIS_HEAP) {
+		/* Full: the newcomer is settled as it is, its error kept. */
+		if (pc->kind != PIECE_WHOLE)
+			g->errvis += pc->e;
+		return;
+	}
+	int i = g->nheap++;
+	g->heap[i] = *pc;
+	while (i > 0 && g->heap[(i - 1) / 2].e < g->heap[i].e) {
+		heap_swap(&g->heap[(i - 1) / 2], &g->heap[i]);
+		i = (i - 1) / 2;
+	}
+}
+
+static piece heap_pop(gather *g)
+{
+	piece top = g->heap[0];
+	g->heap[0] = g->heap[--g->nheap];
+	for (int i = 0;;) {
+		int l = 2 * i + 1, r = l + 1, m = i;
+		if (l < g->nheap && g->heap[l].e > g->heap[m].e)
+			m = l;
+		if (r < g->nheap && g->heap[r].e > g->heap[m].e)
+			m = r;
+		if (m == i)
+			break;
+		heap_swap(&g->heap[m], &g->heap[i]);
+		i = m;
+	}
+	return top;
+}
+
+/*
+ * Trace the rays of a piece to its corners (pulled 1 % towards its
+ * centroid, off the edges it shares) and its centroid: fills p (the
+ * visible fraction, half from the centroid, half from the corners) and
+ * returns the number of rays tried.  Corners, because a straight shadow
+ * edge that crosses a convex piece always leaves corners on both sides:
+ * no such edge can pass between the rays unseen.  Rays go only to points
+ * in front of the point's tangent plane (the rest of the piece does not
+ * contribute, and a ray there would run under the surface); 0 rays: the
+ * piece straddles the plane with no point in front, counted visible.
+ */
+static int trace_piece(const gather *g, const rad_patch *s, double *p)
+{
+	v3 v[5];
+	int nv = rad_patch_vertices(s, v), tried = 0;
+	v3 c = rad_patch_centroid(s);
+	double open_v = 0, open_c = 0, nvt = 0, wc = 0;
+	for (int k = 0; k < nv; k++)
+		v[k] = v3_add(c, v3_scale(v3_sub(v[k], c), 0.99));
+	v[nv] = c;
+	for (int k = 0; k <= nv; k++) {
+		if (!(v3_dot(v3_sub(v[k], g->x), g->n) > 0))
 			continue;
 		tried++;
-		open += rad_vis_segment(g->vis, g->x, &g->n, pts[k], &s->n);
+		int o = rad_vis_segment(g->vis, g->x, &g->n, v[k], &s->n);
+		if (k < nv) {
+			nvt++;
+			open_v += o;
+		} else {
+			wc = 1;
+			open_c = o;
+		}
 	}
-	double d = v3_len(v3_sub(rad_patch_centroid(s), g->x));
-	int settled = open == 0 || open == tried || patch_size(s) < THETA * d;
-	if (depth >= VIS_DEPTH || (tried > 0 && settled))
-		return tried > 0 ? F * open / tried : F;
+	if (tried == 0)
+		*p = 1;
+	else if (nvt == 0)
+		*p = open_c;
+	else if (!wc)
+		*p = open_v / nvt;
+	else
+		*p = 0.5 * open_c + 0.5 * open_v / nvt;
+	return tried;
+}
+
+/*
+ * The error of a traced piece of share c = w F whose rays disagree: the
+ * binomial error of the fraction, c sqrt(p (1 - p) / k); c / 2 when no
+ * ray could be tried.  Agreeing rays leave no error (no straight edge
+ * passes between corners unseen); a large piece is checked once more all
+ * the same (refine).
+ */
+static double piece_error(double c, double p, int tried)
+{
+	if (tried == 0)
+		return c / 2;
+	return c * sqrt(p * (1 - p) / tried);
+}
+
+/*
+ * Visible kernel of a piece of source of radiosity weight w (the top of a
+ * source: a leaf, an element taken whole, an emitter).  Four rays now;
+ * a piece they leave unsure waits in the point's heap until the total is
+ * known (refine).
+ */
+static double visible_ff(gather *g, const rad_patch *s, double F, double w)
+{
+	double p;
+	int tried = trace_piece(g, s, &p);
+	piece pc = {*s, w, F, w * F * p, 0, 0, PIECE_WHOLE};
+	if (tried == 0 || (p > 0 && p < 1)) {
+		pc.kind = PIECE_PARTIAL;
+		pc.e = piece_error(w * F, p, tried);
+	} else {
+		pc.e = w * F / (tried + 2); /* provisional: see refine */
+	}
+	if (pc.e > 0)
+		heap_push(g, &pc);
+	return F * p;
+}
+
+/* Split one unsure piece into quarters, each with its own exact kernel
+ * and rays; the total is corrected by the difference.  Returns the sum of
+ * the errors of the quarters put back in the heap. */
+static double split_piece(gather *g, const piece *pc)
+{
 	rad_patch q[4];
-	patch_quarters(s, q);
-	double sum = 0;
+	double pushed = 0;
+	patch_quarters(&pc->s, q);
+	g->total -= pc->est;
 	for (int k = 0; k < 4; k++) {
-		double f = rad_ff_point_patch(g->x, g->n, &q[k]);
-		if (f > 0)
-			sum += visible_ff(g, &q[k], f, depth + 1);
+		double f = rad_ff_point_patch(g->x, g->n, &q[k]), p;
+		if (!(f > 0))
+			continue;
+		int tried = trace_piece(g, &q[k], &p);
+		int kind = tried == 0 || (p > 0 && p < 1) ? PIECE_PARTIAL
+		                                          : PIECE_WHOLE;
+		piece c = {q[k],          pc->w, f,
+		           pc->w * f * p, 0,     (uint8_t)(pc->depth + 1),
+		           (uint8_t)kind};
+		g->total += c.est;
+		/* Quarters whose rays agree are settled. */
+		if (kind == PIECE_PARTIAL)
+			c.e = piece_error(pc->w * f, p, tried);
+		if (c.e <= 0)
+			continue;
+		if (c.depth >= VIS_DEPTH || g->nheap == VIS_HEAP) {
+			g->errvis += c.e;
+			continue;
+		}
+		heap_push(g, &c);
+		pushed += c.e;
 	}
-	return sum;
+	return pushed;
+}
+
+/*
+ * Once the point's total is known: a whole piece whose rays agreed is
+ * unsure only if it is large (over BIG_SHARE x tau x total: its quarters
+ * get rays of their own); then the pieces with the largest errors are
+ * split until their errors add up to less than half the tolerance, or the
+ * split budget is spent.  Errors are added linearly: along one shadow
+ * edge they have the same sign.
+ */
+static void refine(gather *g)
+{
+	double big = BIG_SHARE * g->tau * running(g), sum = 0;
+	int n = g->nheap;
+	g->nheap = 0;
+	for (int i = 0; i < n; i++) {
+		piece pc = g->heap[i];
+		if (pc.kind == PIECE_WHOLE && pc.w * pc.F <= big)
+			continue;
+		heap_push(g, &pc);
+		sum += pc.e;
+	}
+	for (int splits = 0; g->nheap > 0 && splits < VIS_SPLITS; splits++) {
+		if (g->heap[0].kind != PIECE_WHOLE &&
+		    sum <= 0.5 * g->tau * running(g))
+			break;
+		piece pc = heap_pop(g);
+		sum -= pc.e;
+		sum += split_piece(g, &pc);
+	}
+	for (int i = 0; i < g->nheap; i++)
+		if (g->heap[i].kind != PIECE_WHOLE)
+			g->errvis += g->heap[i].e;
+	g->nheap = 0;
 }
 
 static int far_enough(const gather *g, double size, double dist, double bound)
 {
-	return size < THETA * dist &&
-	       bound <= FRACTION * fmax(g->total, g->floor);
+	return size < THETA * dist && bound <= g->tau * running(g);
 }
 
 /*
@@ -159,13 +372,20 @@ static double children_rf(const gather *g, const rad_elem *e, const float E[3])
 	return rf;
 }
 
+/* Photopic reflected radiosity B - E of an element. */
+static double reflected(const rad_elem *e, const float E[3])
+{
+	float R[3] = {e->B[0] - E[0], e->B[1] - E[1], e->B[2] - E[2]};
+	return rad_luma(R);
+}
+
 /* The reflected radiosity B - E of element id and below (E: the uniform
- * emission already counted exactly on the whole polygon, or zero). */
-static void gather_elem(gather *g, uint32_t id, const float E[3])
+ * emission already counted exactly on the whole polygon, or zero; rp: the
+ * parent's B - E, or -1 for a root). */
+static void gather_elem(gather *g, uint32_t id, const float E[3], double rp)
 {
 	const rad_elem *e = rad_elem_at(g->h, id);
-	float R[3] = {e->B[0] - E[0], e->B[1] - E[1], e->B[2] - E[2]};
-	double r = rad_luma(R);
+	double r = reflected(e, E);
 	/* On a black emitter B - E is only the rounding of the pull. */
 	if (r <= NOISE_REL * rad_luma(E))
 		return;
@@ -177,17 +397,25 @@ static void gather_elem(gather *g, uint32_t id, const float E[3])
 	if (F <= 0)
 		return;
 	if (e->child == RAD_NONE) {
-		g->total += r * visible_ff(g, &p, F, 0);
+		double fv = visible_ff(g, &p, F, r);
+		g->total += r * fv;
+		if (rp >= 0)
+			add_error(g, fabs(r - rp) * fv);
 		return;
 	}
 	double d = v3_len(v3_sub(rad_patch_centroid(&p), g->x));
 	if (!far_enough(g, patch_size(&p), d, r * F)) {
 		for (uint32_t k = 0; k < 4; k++)
-			gather_elem(g, e->child + k, E);
+			gather_elem(g, e->child + k, E, r);
 		return;
 	}
-	/* visible_ff / F: the element's visible fraction. */
-	g->total += children_rf(g, e, E) * visible_ff(g, &p, F, 0) / F;
+	/* The children's weighting rf / F is the piece's radiosity weight. */
+	double rf = children_rf(g, e, E);
+	if (!(rf > 0))
+		return;
+	double v = visible_ff(g, &p, F, rf / F) / F;
+	g->total += rf * v;
+	add_error(g, fabs(rf - r * F) * v);
 }
 
 static void gather_poly(gather *g, uint32_t pid)
@@ -198,15 +426,18 @@ static void gather_poly(gather *g, uint32_t pid)
 	const rad_material *m = &s->mats[poly->mat];
 	double e = rad_luma(m->emit);
 	if (e <= 0) {
-		gather_elem(g, pid, none);
+		gather_elem(g, pid, none, -1);
 		return;
 	}
 	rad_patch p;
 	rad_patch_from_poly(&p, poly);
 	double F = rad_ff_point_patch(g->x, g->n, &p);
-	if (F > 0)
-		g->total += e * visible_ff(g, &p, F, 0);
-	gather_elem(g, pid, m->emit);
+	if (F > 0) {
+		double c = e * visible_ff(g, &p, F, e);
+		g->total += c;
+		g->direct += c;
+	}
+	gather_elem(g, pid, m->emit, -1);
 }
 
 static v3 box_centre(const rad_cluster *c)
@@ -237,14 +468,18 @@ static double box_distance(const rad_cluster *c, v3 x)
 	return sqrt(d2);
 }
 
-/* Isotropic cluster: area A/4 radiating B from its centre. */
+/* Isotropic cluster: area A/4 radiating B from its centre, seen or not
+ * along one ray: half its share is the error estimate. */
 static void eval_cluster(gather *g, const rad_cluster *c, double b, v3 ctr,
                          double d)
 {
 	double cosx = v3_dot(g->n, v3_sub(ctr, g->x)) / d;
-	if (cosx <= 0 || !rad_vis_segment(g->vis, g->x, &g->n, ctr, NULL))
+	if (cosx <= 0)
 		return;
-	g->total += b * (c->area / 4) * cosx / (M_PI * d * d);
+	double share = b * (c->area / 4) * cosx / (M_PI * d * d);
+	add_error(g, share / 2);
+	if (rad_vis_segment(g->vis, g->x, &g->n, ctr, NULL))
+		g->total += share;
 }
 
 static void gather_cluster(gather *g, uint32_t cid)
@@ -288,21 +523,33 @@ typedef struct query {
 	const rad_scene *scene;
 	const rad_hier *h;
 	const double *pts;
-	double *lux;
-	double floor;
+	double *lux, *error_lux;
+	double floor, tau, solve_error;
 } query;
 
-static double point_lux(const query *q, v3 x, v3 n)
+static double point_lux(const query *q, v3 x, v3 n, double *error)
 {
 	const rad_scene *s = q->scene;
-	gather g = {q->h, s->vis, x, n, 0, q->floor};
+	gather g; /* not zeroed as a whole: the heap is large */
+	g.h = q->h;
+	g.vis = s->vis;
+	g.x = x;
+	g.n = n;
+	g.tau = q->tau;
+	g.floor = q->floor;
+	g.total = g.err2 = g.errvis = 0;
+	g.nheap = 0;
 	for (uint32_t l = 0; l < s->nlights; l++) {
 		const rad_light *L = &s->lights[l];
 		g.total += rad_light_point(s->vis, L, x, n, NULL) *
 		           luma_d(L->intensity);
 	}
+	g.direct = g.total;
 	if (s->npolys > 0)
 		gather_cluster(&g, 0 | RAD_TAG_CLUSTER);
+	refine(&g);
+	*error = sqrt(g.err2) + g.errvis +
+	         q->solve_error * fmax(g.total - g.direct, 0);
 	return g.total;
 }
 
@@ -312,7 +559,10 @@ static void query_range(void *ud, size_t begin, size_t end, int thread)
 	(void)thread;
 	for (size_t i = begin; i < end; i++) {
 		const double *p = q->pts + 6 * i;
-		q->lux[i] = point_lux(q, v3_d(p), v3_norm(v3_d(p + 3)));
+		double e;
+		q->lux[i] = point_lux(q, v3_d(p), v3_norm(v3_d(p + 3)), &e);
+		if (q->error_lux)
+			q->error_lux[i] = e;
 	}
 }
 
@@ -335,17 +585,29 @@ static rad_status check_points(const double *pts, size_t n, rad_error *err)
 }
 
 rad_status rad_query_illuminance(const rad_scene *scene, const rad_hier *h,
-                                 rad_par *par, const double *pts, size_t n,
-                                 double *lux, rad_error *err)
+                                 rad_par *par, const rad_query_args *a,
+                                 rad_error *err)
 {
-	if (n > 0 && (!pts || !lux))
+	size_t n = a->n;
+	if (n > 0 && (!a->pts || !a->lux))
 		return rad_fail(err, RAD_ERR_INVALID,
 		                "illuminance: %zu points but %s is NULL", n,
-		                pts ? "the output" : "the point array");
-	rad_status st = check_points(pts, n, err);
+		                a->pts ? "the output" : "the point array");
+	if (!(a->tol > 0 && a->tol < 1))
+		return rad_fail(err, RAD_ERR_INVALID,
+		                "illuminance: tolerance must be in (0, 1) "
+		                "(got %g)",
+		                a->tol);
+	if (!(a->solve_error >= 0) || !isfinite(a->solve_error))
+		return rad_fail(err, RAD_ERR_INVALID,
+		                "illuminance: solution error must be a finite "
+		                "number >= 0 (got %g)",
+		                a->solve_error);
+	rad_status st = check_points(a->pts, n, err);
 	if (st != RAD_OK || n == 0)
 		return st;
-	query q = {scene, h, pts, lux, 0};
+	query q = {scene,        h, a->pts, a->lux,
+	           a->error_lux, 0, a->tol, a->solve_error};
 	if (scene->npolys > 0)
 		q.floor = FLOOR_REL *
 		          rad_luma(rad_cluster_at(h, RAD_TAG_CLUSTER)->B);
@@ -356,13 +618,26 @@ rad_status rad_query_illuminance(const rad_scene *scene, const rad_hier *h,
 	return RAD_OK;
 }
 
-rad_status rad_solver_illuminance(const rad_solver *sv, const double *pts,
-                                  size_t n, double *lux, rad_error *err)
+rad_status rad_solver_query(const rad_solver *sv, const double *pts, size_t n,
+                            double tol, double *lux, double *error_lux,
+                            rad_error *err)
 {
 	if (!sv)
 		return rad_fail(err, RAD_ERR_INVALID, "illuminance: no solver");
-	return rad_query_illuminance(sv->scene, &sv->h, sv->par, pts, n, lux,
-	                             err);
+	double se = sv->stats.error_estimate;
+	rad_query_args a = {pts,
+	                    n,
+	                    tol > 0 ? tol : sv->opt.query_tol,
+	                    isfinite(se) && se > 0 ? se : 0,
+	                    lux,
+	                    error_lux};
+	return rad_query_illuminance(sv->scene, &sv->h, sv->par, &a, err);
+}
+
+rad_status rad_solver_illuminance(const rad_solver *sv, const double *pts,
+                                  size_t n, double *lux, rad_error *err)
+{
+	return rad_solver_query(sv, pts, n, 0, lux, NULL, err);
 }
 
 /* ---------------------------------------------------------------- leaves */

@@ -227,6 +227,17 @@ typedef struct rad_options {
 	/* Study statistics (re-created links): costs memory, counted as
 	 * "study" and left out of mem.peak_work.  Off by default. */
 	int study;
+	/*
+	 * Relative tolerance of illuminance queries: the final gather refines
+	 * visibility, near field and far-field cut-offs until its estimated
+	 * error is below this fraction of the answer.  Set by
+	 * rad_options_accuracy(); > 0.
+	 */
+	double query_tol;
+	/* error_estimate below which the solution counts as converged
+	 * (rad_solver_converge with tol 0, stats.converged). */
+	double converge_tol;
+	double accuracy; /* what rad_options_accuracy() was given */
 	int threads;     /* worker threads; 0 = number of cores */
 	int rcv_samples; /* receiver points per form factor (1..16) */
 	int vis_samples; /* shadow rays per receiver point (1..16) */
@@ -240,7 +251,26 @@ typedef struct rad_options {
 	const volatile int *cancel;
 } rad_options;
 
+/*
+ * Defaults: rad_options_accuracy(o, RAD_ACCURACY_DEFAULT) on top of the
+ * solver-independent settings.
+ */
 void rad_options_default(rad_options *o);
+
+/*
+ * The one accuracy knob: queried lux should be within `accuracy` (a
+ * relative error, e.g. 0.01 for 1 %) of the truth.  Sets eps, variation,
+ * query_tol and converge_tol together; the expert knobs may still be
+ * overridden afterwards.  o->accuracy records the value.
+ * RAD_ERR_INVALID unless RAD_ACCURACY_MIN <= accuracy <= RAD_ACCURACY_MAX.
+ */
+#define RAD_ACCURACY_DEFAULT 0.02
+#define RAD_ACCURACY_MIN 1e-3
+#define RAD_ACCURACY_MAX 0.5
+/* The query tolerance the default accuracy gives (rad_solution_query). */
+#define RAD_QUERY_TOL_DEFAULT (RAD_ACCURACY_DEFAULT / 2)
+rad_status rad_options_accuracy(rad_options *o, double accuracy,
+                                rad_error *err);
 /* Parse "matrix" / "progressive" / "hr" / "rmb"; RAD_ERR_INVALID if unknown. */
 rad_status rad_solver_kind_parse(const char *name, rad_solver_kind *out);
 const char *rad_solver_kind_name(rad_solver_kind k);
@@ -299,7 +329,8 @@ rad_status rad_solver_new(const rad_scene *scene, const rad_options *opt,
  */
 rad_status rad_solver_step(rad_solver *sv, rad_error *err);
 
-/* Step until error_estimate <= tol or max_iter iterations were done. */
+/* Step until error_estimate <= tol (0: opt.converge_tol) or max_iter
+ * iterations were done. */
 rad_status rad_solver_converge(rad_solver *sv, double tol, uint32_t max_iter,
                                rad_error *err);
 
@@ -315,6 +346,18 @@ void rad_solver_stats(const rad_solver *sv, rad_stats *out);
  */
 rad_status rad_solver_illuminance(const rad_solver *sv, const double *pts,
                                   size_t n, double *lux, rad_error *err);
+
+/*
+ * Illuminance with an error estimate.  tol is the relative tolerance of
+ * the final gather (<= 0: the solver's query_tol); error_lux (may be NULL)
+ * receives, per point, an estimate of |lux - truth| in lux: the gather's
+ * own error (visibility, cut-offs, the solution's variation below its
+ * leaves) plus the solver's convergence error_estimate times the
+ * reflected part.
+ */
+rad_status rad_solver_query(const rad_solver *sv, const double *pts, size_t n,
+                            double tol, double *lux, double *error_lux,
+                            rad_error *err);
 
 /* Per-leaf results, for export: calls fn once per leaf element. */
 typedef void (*rad_leaf_fn)(void *ud, uint32_t node, const double p[4][3],
@@ -341,6 +384,14 @@ rad_status rad_solution_new(const rad_solver *sv, rad_solution **out,
 /* Same as rad_solver_illuminance, single-threaded. */
 rad_status rad_solution_illuminance(const rad_solution *s, const double *pts,
                                     size_t n, double *lux, rad_error *err);
+/*
+ * Same as rad_solver_query.  tol <= 0 means RAD_QUERY_TOL_DEFAULT;
+ * solve_error is the solver's error_estimate when the solution was taken
+ * (rad_stats.error_estimate; a solution does not store it), 0 if unknown.
+ */
+rad_status rad_solution_query(const rad_solution *s, const double *pts,
+                              size_t n, double tol, double solve_error,
+                              double *lux, double *error_lux, rad_error *err);
 void rad_solution_leaves(const rad_solution *s, rad_leaf_fn fn, void *ud);
 /* Iteration the solution was taken after. */
 uint32_t rad_solution_iteration(const rad_solution *s);

@@ -231,13 +231,23 @@ rad_status rad_solution_new(const rad_solver *sv, rad_solution **out,
 
 /* --------------------------------------------------------------- queries */
 
-rad_status rad_solution_illuminance(const rad_solution *s, const double *pts,
-                                    size_t n, double *lux, rad_error *err)
+rad_status rad_solution_query(const rad_solution *s, const double *pts,
+                              size_t n, double tol, double solve_error,
+                              double *lux, double *error_lux, rad_error *err)
 {
 	if (!s)
 		return rad_fail(err, RAD_ERR_INVALID,
 		                "illuminance: no solution");
-	return rad_query_illuminance(s->scene, &s->h, NULL, pts, n, lux, err);
+	rad_query_args a = {
+	        pts,         n,   tol > 0 ? tol : RAD_QUERY_TOL_DEFAULT,
+	        solve_error, lux, error_lux};
+	return rad_query_illuminance(s->scene, &s->h, NULL, &a, err);
+}
+
+rad_status rad_solution_illuminance(const rad_solution *s, const double *pts,
+                                    size_t n, double *lux, rad_error *err)
+{
+	return rad_solution_query(s, pts, n, 0, 0, lux, NULL, err);
 }
 
 void rad_solution_leaves(const rad_solution *s, rad_leaf_fn fn, void *ud)

@@ -24,14 +24,37 @@ void rad_options_default(rad_options *o)
 	memset(o, 0, sizeof(*o));
 	o->solver = RAD_SOLVER_HR;
 	o->oracle = RAD_ORACLE_BFA;
-	o->eps = 1e-4;
-	o->variation = 0.5;
 	o->min_edge_rel = 5e-3;
 	o->mesh_edge_rel = 0.05;
 	o->clustering = 1;
 	o->threads = 0;
 	o->rcv_samples = 4;
 	o->vis_samples = 4;
+	rad_options_accuracy(o, RAD_ACCURACY_DEFAULT, NULL);
+}
+
+/*
+ * What one accuracy R asks of each knob.  The query's gather gets half of
+ * the budget; the solution the rest: the convergence tolerance a
+ * twentieth (the iteration error is cheap to remove), the link threshold
+ * eps (a flux fraction: a link's error is second order in its size) and
+ * the receiver variation in proportion.  At the default R = 0.02 these
+ * are the long-standing defaults (eps 1e-4, variation 0.5, convergence
+ * 1e-3, query tolerance 1e-2).
+ */
+rad_status rad_options_accuracy(rad_options *o, double accuracy, rad_error *err)
+{
+	if (!(accuracy >= RAD_ACCURACY_MIN && accuracy <= RAD_ACCURACY_MAX))
+		return rad_fail(err, RAD_ERR_INVALID,
+		                "accuracy must be in [%g, %g] (got %g)",
+		                RAD_ACCURACY_MIN, RAD_ACCURACY_MAX, accuracy);
+	double r = accuracy / RAD_ACCURACY_DEFAULT;
+	o->accuracy = accuracy;
+	o->query_tol = accuracy / 2;
+	o->converge_tol = accuracy / 20;
+	o->eps = 1e-4 * r * r;
+	o->variation = 0.5 * r;
+	return RAD_OK;
 }
 
 rad_status rad_solver_kind_parse(const char *name, rad_solver_kind *out)
@@ -92,6 +115,15 @@ static rad_status check_options(const rad_options *o, rad_error *err)
 		        err, RAD_ERR_INVALID,
 		        "variation must be a finite number > 0 (got %g)",
 		        o->variation);
+	if (!(o->query_tol > 0 && o->query_tol < 1))
+		return rad_fail(err, RAD_ERR_INVALID,
+		                "query tolerance must be in (0, 1) (got %g)",
+		                o->query_tol);
+	if (!(o->converge_tol > 0) || !isfinite(o->converge_tol))
+		return rad_fail(err, RAD_ERR_INVALID,
+		                "convergence tolerance must be a finite "
+		                "number > 0 (got %g)",
+		                o->converge_tol);
 	if (!(o->min_edge_rel > 0) || !(o->min_edge_rel < 1))
 		return rad_fail(err, RAD_ERR_INVALID,
 		                "min_edge_rel must be in (0, 1) (got %g)",
@@ -134,7 +166,7 @@ rad_status rad_solver_new(const rad_scene *scene, const rad_options *opt,
 	              RAD_LUMA_G * scene->total_flux[1] +
 	              RAD_LUMA_B * scene->total_flux[2];
 	sv->flux_scale = flux > 0 ? flux : 1.0;
-	sv->tol = 1e-3;
+	sv->tol = opt->converge_tol;
 	st = rad_par_new(opt->threads, &sv->par, err);
 	if (!st)
 		st = rad_hier_init(&sv->h, scene, &sv->mem,
@@ -183,6 +215,8 @@ rad_status rad_solver_step(rad_solver *sv, rad_error *err)
 rad_status rad_solver_converge(rad_solver *sv, double tol, uint32_t max_iter,
                                rad_error *err)
 {
+	if (tol == 0)
+		tol = sv->opt.converge_tol;
 	if (!(tol > 0))
 		return rad_fail(err, RAD_ERR_INVALID,
 		                "tolerance must be > 0 (got %g)", tol);

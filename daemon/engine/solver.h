@@ -71,9 +71,17 @@ void rad_solver_set_residual(rad_solver *sv, double r);
  * Queries over any hierarchy (query.c): a solver's own, or a published
  * solution's (solution.c).  par NULL runs on the caller's thread.
  */
+typedef struct rad_query_args {
+	const double *pts; /* 6 per point */
+	size_t n;
+	double tol;         /* relative tolerance of the gather, (0, 1) */
+	double solve_error; /* the solution's relative error, >= 0 */
+	double *lux;        /* n outputs */
+	double *error_lux;  /* n outputs, or NULL */
+} rad_query_args;
 rad_status rad_query_illuminance(const rad_scene *scene, const rad_hier *h,
-                                 rad_par *par, const double *pts, size_t n,
-                                 double *lux, rad_error *err);
+                                 rad_par *par, const rad_query_args *a,
+                                 rad_error *err);
 void rad_query_leaves(const rad_hier *h, rad_leaf_fn fn, void *ud);
 
 #endif
