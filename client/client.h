@@ -55,6 +55,9 @@ enum {
 	X(SOLVE, "solve", 0, NULL,                                             \
 	  "also create a job and run it to convergence")                       \
 	X(SOLVER, "solver", 1, "S", "hr | rmb | matrix | progressive [hr]")    \
+	X(ACCURACY, "accuracy", 1, "R",                                        \
+	  "target relative error of the lux, sets eps, variation, tol and "    \
+	  "the query tolerance [0.02]")                                        \
 	X(EPS, "eps", 1, "E", "refinement threshold, > 0 [1e-4]")              \
 	X(ORACLE, "oracle", 1, "O", "refinement test: bfa | bf | f [bfa]")     \
 	X(VARIATION, "variation", 1, "V",                                      \

@@ -54,6 +54,7 @@ int lx_job_options(lx_ctx *cx, json_t *req)
 		int integer;
 		long long lo, hi;
 	} num[] = {
+	        {LX_OPT_ACCURACY, "accuracy", 0, 0, 0},
 	        {LX_OPT_EPS, "eps", 0, 0, 0},
 	        {LX_OPT_VARIATION, "variation", 0, 0, 0},
 	        {LX_OPT_MIN_EDGE, "min_edge_rel", 0, 0, 0},

@@ -29,11 +29,11 @@ static const struct {
 #define GLOBAL_OPTS                                                            \
 	(LX_BIT(HELP) | LX_BIT(JSON) | LX_BIT(CONNECT) | LX_BIT(TOKEN_FILE))
 #define CREATE_OPTS                                                            \
-	(LX_BIT(NAME) | LX_BIT(SOLVER) | LX_BIT(EPS) | LX_BIT(ORACLE) |        \
-	 LX_BIT(VARIATION) | LX_BIT(NO_CLUSTERING) | LX_BIT(MINIMAL_STORE) |   \
-	 LX_BIT(STUDY) | LX_BIT(MIN_EDGE) | LX_BIT(MESH_EDGE) |                \
-	 LX_BIT(RCV_SAMPLES) | LX_BIT(VIS_SAMPLES) | LX_BIT(TOL) |             \
-	 LX_BIT(MAX_ITERATIONS) | LX_BIT(THREADS))
+	(LX_BIT(NAME) | LX_BIT(SOLVER) | LX_BIT(ACCURACY) | LX_BIT(EPS) |      \
+	 LX_BIT(ORACLE) | LX_BIT(VARIATION) | LX_BIT(NO_CLUSTERING) |          \
+	 LX_BIT(MINIMAL_STORE) | LX_BIT(STUDY) | LX_BIT(MIN_EDGE) |            \
+	 LX_BIT(MESH_EDGE) | LX_BIT(RCV_SAMPLES) | LX_BIT(VIS_SAMPLES) |       \
+	 LX_BIT(TOL) | LX_BIT(MAX_ITERATIONS) | LX_BIT(THREADS))
 
 typedef struct cmd_def {
 	const char *name;
@@ -95,8 +95,10 @@ static const cmd_def commands[] = {
          "t*v, s,t in [0,1], one point at each\ncell centre; the default "
          "spacing follows EN 12464-1 (0.2 * 5^log10(d),\nd the longer "
          "side). Its summary (min, mean, max, uniformity) goes to\nstderr.\n"
-         "\nCSV columns: points x,y,z,nx,ny,nz,lux; grid i,j,x,y,z,lux; "
-         "surfaces\nnode,name,area_m2,min_lux,mean_lux,max_lux.\n\n"
+         "\nCSV columns: points x,y,z,nx,ny,nz,lux,error_lux; grid "
+         "i,j,x,y,z,lux,error_lux;\nsurfaces node,name,area_m2,min_lux,"
+         "mean_lux,max_lux. error_lux is the\nestimated error of each "
+         "value (the job's accuracy sets its target).\n\n"
          "Examples:\n  luxrad query 4 --points desk.txt\n"
          "  luxrad query 4 --grid --origin 0,0.8,0 --u 4,0,0 --v 0,0,3\n"
          "  luxrad query 4 --surfaces --json\n"},

@@ -88,11 +88,12 @@ static size_t hello_limit(const lx_ctx *cx, const char *key, size_t dflt)
 }
 
 /*
- * Query the points in batches; *lux receives every answer in order.
- * Returns an exit code; under --json each reply is printed.
+ * Query the points in batches; *lux and *elux receive every answer and
+ * its error estimate in order.  Returns an exit code; under --json each
+ * reply is printed.
  */
 static int query_points_batched(lx_ctx *cx, long long job, json_t *points,
-                                json_t *lux)
+                                json_t *lux, json_t *elux)
 {
 	size_t max_pts = hello_limit(cx, "max_points", 1000000);
 	size_t max_hdr = hello_limit(cx, "max_header_bytes",
@@ -120,18 +121,22 @@ static int query_points_batched(lx_ctx *cx, long long job, json_t *points,
 		json_object_set(req, "points", batch);
 		rc = lx_call(cx, req, &reply);
 		json_t *l = json_object_get(reply, "lux");
+		json_t *e = json_object_get(reply, "error_lux");
 		if (rc == LX_EXIT_OK && cx->json)
 			lx_print_json(reply);
 		if (rc == LX_EXIT_OK &&
-		    json_array_size(l) != json_array_size(batch)) {
+		    (json_array_size(l) != json_array_size(batch) ||
+		     json_array_size(e) != json_array_size(batch))) {
 			fprintf(stderr,
 			        "luxrad: the daemon answered %zu of "
 			        "%zu points\n",
 			        json_array_size(l), json_array_size(batch));
 			rc = LX_EXIT_DAEMON;
 		}
-		if (rc == LX_EXIT_OK)
+		if (rc == LX_EXIT_OK) {
 			json_array_extend(lux, l);
+			json_array_extend(elux, e);
+		}
 		json_decref(batch);
 		json_decref(reply);
 		if (rc != LX_EXIT_OK)
@@ -142,7 +147,7 @@ static int query_points_batched(lx_ctx *cx, long long job, json_t *points,
 
 static int query_points(lx_ctx *cx, long long job)
 {
-	json_t *points, *lux;
+	json_t *points, *lux, *elux;
 	size_t n;
 	int rc = lx_points_load(cx->val[LX_OPT_POINTS], &points, &n);
 
@@ -153,20 +158,23 @@ static int query_points(lx_ctx *cx, long long job)
 		return rc;
 	}
 	lux = json_array();
-	rc = query_points_batched(cx, job, points, lux);
+	elux = json_array();
+	rc = query_points_batched(cx, job, points, lux, elux);
 	if (rc == LX_EXIT_OK && !cx->json) {
-		printf("x,y,z,nx,ny,nz,lux\n");
+		printf("x,y,z,nx,ny,nz,lux,error_lux\n");
 		for (size_t i = 0; i < n; i++) {
 			json_t *p = json_array_get(points, i);
 			for (size_t k = 0; k < 6; k++)
 				printf("%.9g,",
 				       json_number_value(json_array_get(p, k)));
-			printf("%.6g\n",
-			       json_number_value(json_array_get(lux, i)));
+			printf("%.6g,%.2g\n",
+			       json_number_value(json_array_get(lux, i)),
+			       json_number_value(json_array_get(elux, i)));
 		}
 	}
 	json_decref(points);
 	json_decref(lux);
+	json_decref(elux);
 	return rc;
 }
 
@@ -213,28 +221,32 @@ static void print_grid(const json_t *reply)
 {
 	long long nu = lx_jint(reply, "nu"), nv = lx_jint(reply, "nv");
 	json_t *lux = json_object_get(reply, "lux");
+	json_t *elux = json_object_get(reply, "error_lux");
 	json_t *pts = json_object_get(reply, "points");
 	char u0[32] = "-"; /* null when the mean is 0 */
 
-	printf("i,j,x,y,z,lux\n");
+	printf("i,j,x,y,z,lux,error_lux\n");
 	for (long long j = 0; j < nv; j++) {
 		for (long long i = 0; i < nu; i++) {
 			size_t k = (size_t)(j * nu + i);
 			json_t *p = json_array_get(pts, k);
-			printf("%lld,%lld,%.9g,%.9g,%.9g,%.6g\n", i, j,
+			printf("%lld,%lld,%.9g,%.9g,%.9g,%.6g,%.2g\n", i, j,
 			       json_number_value(json_array_get(p, 0)),
 			       json_number_value(json_array_get(p, 1)),
 			       json_number_value(json_array_get(p, 2)),
-			       json_number_value(json_array_get(lux, k)));
+			       json_number_value(json_array_get(lux, k)),
+			       json_number_value(json_array_get(elux, k)));
 		}
 	}
 	if (json_is_number(json_object_get(reply, "u0")))
 		snprintf(u0, sizeof u0, "%.3f", lx_jdbl(reply, "u0"));
 	fprintf(stderr, "grid %lld x %lld, spacing %.4g m: ", nu, nv,
 	        lx_jdbl(reply, "spacing"));
-	fprintf(stderr, "min %.4g, mean %.4g, max %.4g lux, U0 %s ",
+	fprintf(stderr, "min %.4g, mean %.4g, max %.4g lux, U0 %s, ",
 	        lx_jdbl(reply, "min"), lx_jdbl(reply, "mean"),
 	        lx_jdbl(reply, "max"), u0);
+	fprintf(stderr, "largest error estimate %.2g lux ",
+	        lx_jdbl(reply, "error_max"));
 	fprintf(stderr, "(iteration %lld)\n", lx_jint(reply, "iteration"));
 }
 

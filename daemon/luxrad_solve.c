@@ -36,12 +36,12 @@ enum { EXIT_OKAY = 0, EXIT_SOLVE = 1, EXIT_USAGE = 2 };
 
 /*
  * Default convergence: the solve stops when the engine's estimate of the
- * remaining relative error is below 1e-3 (0.1 % of the converged
- * illuminance, well under what a light meter resolves).  The iteration cap
- * is generous so that scenes with reflectances near 1, which converge
- * slowly, still get there; it only guards against a solver that stalls.
+ * remaining relative error is below the tolerance the accuracy asks for
+ * (rad_options.converge_tol: 1e-3 at the default accuracy, 0.1 % of the
+ * converged illuminance).  The iteration cap is generous so that scenes
+ * with reflectances near 1, which converge slowly, still get there; it
+ * only guards against a solver that stalls.
  */
-#define DEFAULT_TOL 1e-3
 #define DEFAULT_MAX_ITER 10000u
 
 typedef struct cli_args {
@@ -53,6 +53,8 @@ typedef struct cli_args {
 	double tol;          /* converge mode: error_estimate target */
 	uint32_t max_iter;   /* converge mode: iteration cap */
 	int tol_given;       /* --converge seen (excludes --iterations) */
+	double accuracy;     /* --accuracy: relative target error */
+	int accuracy_given;  /* --accuracy seen */
 	int max_iter_given;  /* --max-iterations seen (ditto) */
 	int json;            /* one JSON object on stdout */
 	int per_iteration;   /* a stats line on stderr after each step */
@@ -90,6 +92,11 @@ static const cli_option cli_options[] = {
         {"solver", "NAME", OPT_SOLVER, OPT(solver), 0, 0, 0, 0,
          "matrix | progressive | hr (hierarchical radiosity) | rmb "
          "(reduced-memory hr)"},
+        {"accuracy", "R", OPT_DOUBLE, ARG(accuracy), ARG(accuracy_given),
+         RAD_ACCURACY_MIN, RAD_ACCURACY_MAX, 0,
+         "target relative error of the lux reported; sets --eps, "
+         "--variation,\n                         --converge and the query "
+         "tolerance together (they override it)"},
         {"eps", "X", OPT_DOUBLE, OPT(eps), 0, 0, 1e9, 1,
          "refinement threshold, > 0; smaller is finer (see --oracle)"},
         {"iterations", "N", OPT_U32, ARG(iterations), 0, 1, 1e9, 0,
@@ -200,6 +207,10 @@ static void print_help(const cli_args *defaults)
 	printf("\nWith neither --iterations nor --converge the solve runs "
 	       "until the\nestimated relative error is <= %g (at most %u "
 	       "iterations).\n\n"
+	       "--accuracy R: the lux reported should be within R (relative) "
+	       "of the\ntruth; the default asks for %g.  Each point's "
+	       "estimated error is\nprinted beside it (error_lux in "
+	       "--json).\n\n"
 	       "--eps by oracle: bfa = fraction of the total emitted flux one "
 	       "link may\ncarry; bf = source exitance x form factor, as a "
 	       "fraction of the mean\nemitted exitance (flux / total area); "
@@ -214,13 +225,14 @@ static void print_help(const cli_args *defaults)
 	       "bytes.\n\n"
 	       "Output: a readable report (scene counts, per-iteration table, "
 	       "memory by\nstructure, lux per point), or with --json one "
-	       "object with keys\nilluminance_lux, iterations, seconds, links, "
+	       "object with keys\nilluminance_lux, error_lux, accuracy, "
+	       "query_tolerance, query_seconds,\niterations, seconds, links, "
 	       "elements, clusters, leaves,\nrays, memory_bytes, solver, eps, "
 	       "converged, error_estimate, scene,\nper_iteration.\n\n"
 	       "Exit status: 0 success; 1 scene, solve or I/O error (message "
 	       "on stderr);\n2 usage error (unknown option, bad value, "
 	       "malformed points file).\n",
-	       DEFAULT_TOL, DEFAULT_MAX_ITER);
+	       defaults->tol, DEFAULT_MAX_ITER, RAD_ACCURACY_DEFAULT);
 }
 
 /* --------------------------------------------------------------- parsing */
@@ -368,6 +380,32 @@ static int parse_args(int argc, char **argv, cli_args *a)
 		}
 	}
 	return check_combination(a);
+}
+
+static void args_default(cli_args *a, double accuracy)
+{
+	memset(a, 0, sizeof(*a));
+	rad_options_default(&a->opt);
+	if (accuracy > 0)
+		rad_options_accuracy(&a->opt, accuracy, NULL);
+	a->accuracy = a->opt.accuracy;
+	a->tol = a->opt.converge_tol;
+	a->max_iter = DEFAULT_MAX_ITER;
+}
+
+/*
+ * --accuracy sets several knobs, and an expert knob given beside it wins
+ * whatever the order on the command line: parse once to find the
+ * accuracy, then again over the defaults it gives.
+ */
+static int parse_with_accuracy(int argc, char **argv, cli_args *a)
+{
+	args_default(a, 0);
+	int rc = parse_args(argc, argv, a);
+	if (rc != EXIT_OKAY || a->help || !a->accuracy_given)
+		return rc;
+	args_default(a, a->accuracy);
+	return parse_args(argc, argv, a);
 }
 
 /* ----------------------------------------------------------------- input */
@@ -594,22 +632,31 @@ typedef struct report {
 	const rad_scene_counts *counts;
 	const rad_gltf_info *info;
 	const run_log *lg;
-	const rad_stats *final; /* stats after the last iteration */
-	const double *pts;      /* 6 per point, as read */
-	const double *lux;      /* one per point */
+	const rad_stats *final;  /* stats after the last iteration */
+	const double *pts;       /* 6 per point, as read */
+	const double *lux;       /* one per point */
+	const double *error_lux; /* one per point: estimated |error| */
 	size_t npoints;
+	double query_seconds; /* wall time of the illuminance query */
 } report;
 
 static int print_json(const report *r)
 {
 	const rad_stats *s = r->final;
 	json_t *o = json_object(), *lux = json_array(), *its = json_array();
+	json_t *elux = json_array();
 
-	for (size_t i = 0; i < r->npoints; i++)
+	for (size_t i = 0; i < r->npoints; i++) {
 		json_array_append_new(lux, jreal(r->lux[i]));
+		json_array_append_new(elux, jreal(r->error_lux[i]));
+	}
 	for (size_t i = 0; i < r->lg->n; i++)
 		json_array_append_new(its, json_iteration(&r->lg->it[i]));
 	json_object_set_new(o, "illuminance_lux", lux);
+	json_object_set_new(o, "error_lux", elux);
+	json_object_set_new(o, "accuracy", jreal(r->a->opt.accuracy));
+	json_object_set_new(o, "query_tolerance", jreal(r->a->opt.query_tol));
+	json_object_set_new(o, "query_seconds", jreal(r->query_seconds));
 	json_object_set_new(
 	        o, "solver",
 	        json_string(rad_solver_kind_name(r->a->opt.solver)));
@@ -706,11 +753,13 @@ static void print_text(const report *r)
 	printf("  %-18s %14lld (peak %lld)\n", "total", (long long)m->total,
 	       (long long)m->peak_total);
 	if (r->npoints)
-		printf("\nilluminance (lux)\n");
+		printf("\nilluminance (lux, +- estimated error; query %.3f "
+		       "s)\n",
+		       r->query_seconds);
 	for (size_t i = 0; i < r->npoints; i++) {
 		const double *p = r->pts + 6 * i;
-		printf("  (%g %g %g) n (%g %g %g): %.6g\n", p[0], p[1], p[2],
-		       p[3], p[4], p[5], r->lux[i]);
+		printf("  (%g %g %g) n (%g %g %g): %.6g +- %.2g\n", p[0], p[1],
+		       p[2], p[3], p[4], p[5], r->lux[i], r->error_lux[i]);
 	}
 }
 
@@ -822,6 +871,17 @@ static int export_mesh(const char *path, const rad_scene *sc,
 }
 
 /* Solve the loaded scene, query the points and print the report. */
+/* Lux and error estimates at every point, timed. */
+static rad_status query_points(const rad_solver *sv, const point_list *pl,
+                               double *lux, double *elux, double *seconds,
+                               rad_error *err)
+{
+	double t0 = rad_seconds();
+	rad_status st = rad_solver_query(sv, pl->xyz, pl->n, 0, lux, elux, err);
+	*seconds = rad_seconds() - t0;
+	return st;
+}
+
 static int solve_and_report(const cli_args *a, const rad_scene *sc,
                             const rad_gltf_info *info, const point_list *pl,
                             double load_seconds)
@@ -832,7 +892,8 @@ static int solve_and_report(const cli_args *a, const rad_scene *sc,
 	rad_scene_counts counts;
 	rad_stats final;
 	rad_export_info xinfo;
-	double *lux = calloc(pl->n ? pl->n : 1, sizeof(double));
+	double *lux = calloc(pl->n ? 2 * pl->n : 1, sizeof(double));
+	double *elux = lux + pl->n, tq = 0;
 	int rc = EXIT_SOLVE;
 
 	if (!lux) {
@@ -846,8 +907,8 @@ static int solve_and_report(const cli_args *a, const rad_scene *sc,
 	} else if (a->export_path &&
 	           export_mesh(a->export_path, sc, sv, &xinfo) != EXIT_OKAY) {
 		rc = EXIT_SOLVE;
-	} else if (pl->n && rad_solver_illuminance(sv, pl->xyz, pl->n, lux,
-	                                           &err) != RAD_OK) {
+	} else if (pl->n &&
+	           query_points(sv, pl, lux, elux, &tq, &err) != RAD_OK) {
 		rc = engine_error("illuminance query failed", &err);
 	} else {
 		rad_solver_stats(sv, &final);
@@ -860,7 +921,9 @@ static int solve_and_report(const cli_args *a, const rad_scene *sc,
 		            .final = &final,
 		            .pts = pl->xyz,
 		            .lux = lux,
-		            .npoints = pl->n};
+		            .error_lux = elux,
+		            .npoints = pl->n,
+		            .query_seconds = tq};
 		if (a->json) {
 			rc = print_json(&r);
 		} else {
@@ -888,14 +951,13 @@ static int solve_and_report(const cli_args *a, const rad_scene *sc,
 
 int main(int argc, char **argv)
 {
-	cli_args a = {.tol = DEFAULT_TOL, .max_iter = DEFAULT_MAX_ITER};
+	cli_args a;
 	point_list pl = {0};
 	rad_scene *sc = NULL;
 	rad_gltf_info info = {0};
 	double load_seconds = 0;
 
-	rad_options_default(&a.opt);
-	int rc = parse_args(argc, argv, &a);
+	int rc = parse_with_accuracy(argc, argv, &a);
 	if (rc != EXIT_OKAY)
 		return rc;
 	if (a.help) {

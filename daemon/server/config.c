@@ -36,6 +36,7 @@
  *   5. none: data_dir stays "" and srv_config_check asks for one.
  */
 #include "config.h"
+#include "rad.h"
 #include "textutil.h"
 
 #include <errno.h>
@@ -67,6 +68,7 @@ typedef enum key_type {
 	K_INT,     /* int within [lo, hi] */
 	K_SIZE,    /* size_t bytes within [lo, hi], K/M/G/T suffixes */
 	K_SECONDS, /* double seconds within [lo, hi], s/m/h suffixes */
+	K_REAL,    /* double within [lo, hi] */
 	K_LEVEL,   /* srv_log_level */
 	K_MODBUS,  /* a modbus_* key: parsed and printed by mb_config_* */
 } key_type;
@@ -107,6 +109,10 @@ static const cfg_key keys[] = {
          "engine threads per job (0..1024); 0 = cores / workers, at least 1"},
         {"query_threads", K_INT, F(query_threads), 1, 256, "N", "4",
          "threads answering queries and exports (1..256)"},
+        {"accuracy", K_REAL, F(accuracy), RAD_ACCURACY_MIN, RAD_ACCURACY_MAX,
+         "R", "0.02",
+         "accuracy of jobs that set none: target relative error of the lux "
+         "(0.001..0.5)"},
         {"log_level", K_LEVEL, F(log_level), 0, 0, "LEVEL", "debug",
          "error | warn | info | debug; logs go to stderr"},
         {"max_header_bytes", K_SIZE, F(max_header_bytes), (double)KiB,
@@ -224,6 +230,7 @@ void srv_config_default(srv_config *c)
 	c->workers = 2;
 	c->solver_threads = 0;
 	c->query_threads = 2;
+	c->accuracy = RAD_ACCURACY_DEFAULT;
 	c->log_level = SRV_LOG_INFO;
 	c->max_header_bytes = 4 * MiB;
 	c->max_scene_bytes = GiB;
@@ -385,6 +392,17 @@ static int set_number(srv_config *c, const cfg_key *k, const char *v, char *msg,
 			                "'%s' is out of range %.0f..%.0f bytes",
 			                v, k->lo, k->hi);
 		*(size_t *)p = (size_t)n;
+	} else if (k->type == K_REAL) {
+		char *end;
+		errno = 0;
+		double d = strtod(v, &end);
+		if (end == v || *end || errno || !isfinite(d))
+			return srv_fail(msg, msglen, "'%s' is not a number", v);
+		if (d < k->lo || d > k->hi)
+			return srv_fail(msg, msglen,
+			                "%g is out of range %g..%g", d, k->lo,
+			                k->hi);
+		*(double *)p = d;
 	} else {
 		double s;
 		if (srv_parse_seconds(v, &s) < 0)
@@ -689,6 +707,9 @@ static void fmt_value(const srv_config *c, const cfg_key *k, char *buf,
 		snprintf(buf, len, "%llu", (unsigned long long)n);
 		break;
 	}
+	case K_REAL:
+		fmt_double(buf, len, *(const double *)p);
+		break;
 	case K_SECONDS: {
 		char d[40];
 		fmt_double(d, sizeof(d), *(const double *)p);

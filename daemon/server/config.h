@@ -43,6 +43,7 @@ typedef struct srv_config {
 	int solver_threads;       /* engine threads per job; 0 = cores /
 	                             workers, at least 1 */
 	int query_threads;        /* threads answering queries; default 2 */
+	double accuracy;          /* jobs' default accuracy (rad_options) */
 	srv_log_level log_level;  /* default info; logs go to stderr */
 	/* Limits: each breach is a clear error on the offending connection. */
 	size_t max_header_bytes;      /* default 4 MiB */

@@ -157,7 +157,8 @@ void srv_job_enqueue_locked(srv *s, srv_job *j)
 
 /* ------------------------------------------------------------- solutions */
 
-srv_sol *srv_sol_new(srv *s, rad_solution *sol, srv_scene *sc)
+srv_sol *srv_sol_new(srv *s, rad_solution *sol, srv_scene *sc, double query_tol,
+                     double solve_error)
 {
 	srv_sol *p = calloc(1, sizeof(*p));
 	rad_mem_report m;
@@ -170,6 +171,9 @@ srv_sol *srv_sol_new(srv *s, rad_solution *sol, srv_scene *sc)
 	p->scene = sc;
 	srv_scene_ref(sc);
 	p->iteration = rad_solution_iteration(sol);
+	p->query_tol = query_tol;
+	p->solve_error =
+	        isfinite(solve_error) && solve_error > 0 ? solve_error : 0;
 	rad_solution_memory(sol, &m);
 	p->bytes = m.total;
 	atomic_fetch_add(&s->sol_bytes, p->bytes);
@@ -227,7 +231,8 @@ static void publish(srv *s, srv_job *j, int send_event)
 	json_t *stats = srv_stats_json(&st);
 	char *text = json_dumps(stats, JSON_COMPACT | JSON_REAL_PRECISION(17));
 	if (rad_solution_new(j->solver, &rs, &err) == RAD_OK)
-		ns = srv_sol_new(s, rs, j->scene);
+		ns = srv_sol_new(s, rs, j->scene, j->opt.query_tol,
+		                 st.error_estimate);
 	else
 		srv_warn("job %llu: cannot publish the solution of "
 		         "iteration %u (queries keep the previous one): %s",

@@ -47,7 +47,14 @@ typedef struct opt_def {
 
 #define OV(f) offsetof(opt_values, f)
 
+/*
+ * "accuracy" comes first: it sets eps, variation, query_tol and tol
+ * together (rad_options_accuracy), and any of those given beside it
+ * overrides it whatever the order of the keys.
+ */
 static const opt_def opt_defs[] = {
+        {"accuracy", O_DOUBLE, OV(o.accuracy), RAD_ACCURACY_MIN,
+         RAD_ACCURACY_MAX, 0, 0, NULL},
         {"eps", O_DOUBLE, OV(o.eps), 0, HUGE_VAL, 1, 1, NULL},
         {"oracle", O_ENUM, OV(o.oracle), 0, 0, 0, 0, oracle_names},
         {"variation", O_DOUBLE, OV(o.variation), 0, HUGE_VAL, 1, 1, NULL},
@@ -60,6 +67,7 @@ static const opt_def opt_defs[] = {
         {"threads", O_INT, OV(o.threads), 0, 256, 0, 0, NULL},
         {"rcv_samples", O_INT, OV(o.rcv_samples), 1, 16, 0, 0, NULL},
         {"vis_samples", O_INT, OV(o.vis_samples), 1, 16, 0, 0, NULL},
+        {"query_tol", O_DOUBLE, OV(o.query_tol), 0, 1, 1, 1, NULL},
         {"tol", O_DOUBLE, OV(tol), 0, 1, 1, 0, NULL},
         {"max_iterations", O_INT, OV(max_iter), 1, 1e9, 0, 0, NULL},
 };
@@ -167,7 +175,7 @@ int srv_job_options_parse(srv *s, json_t *opts, const char *solver,
 	json_t *v;
 
 	rad_options_default(&ov.o);
-	ov.tol = 1e-3;
+	ov.o.accuracy = s->accuracy;
 	ov.max_iter = 100;
 	if (solver && rad_solver_kind_parse(solver, &ov.o.solver) != RAD_OK)
 		return opt_fail(err, RP_ERR_INVALID,
@@ -177,6 +185,11 @@ int srv_job_options_parse(srv *s, json_t *opts, const char *solver,
 	if (opts && !json_is_object(opts))
 		return opt_fail(err, RP_ERR_BAD_REQUEST,
 		                "\"options\" must be an object");
+	v = json_object_get(opts, opt_defs[0].name);
+	if (v && set_option(&opt_defs[0], v, &ov, err) != 0)
+		return -1;
+	rad_options_accuracy(&ov.o, ov.o.accuracy, NULL);
+	ov.tol = ov.o.converge_tol;
 	json_object_foreach(opts, key, v)
 	{
 		size_t i = 0;

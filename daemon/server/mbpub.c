@@ -25,7 +25,7 @@
  *   srv_destroy           srv_mb_stop, after the workers are joined
  *
  * Sensor values.  After each iteration event the job's latest solution
- * is evaluated at every sensor with rad_solution_illuminance -- the call
+ * is evaluated at every sensor with rad_solution_query -- the call
  * query.points makes, with the same 6 doubles per point -- on the query
  * pool; the result is published on the I/O thread, per sensor only when
  * its iteration is newer than the one published (two evaluations may
@@ -341,13 +341,20 @@ static void eval_free(srv *s, eval_task *e)
 	free(e);
 }
 
+/* Lux at sensors: the call query.points makes, with the job's tolerance. */
+static rad_status eval_lux(const srv_sol *sol, const double *pts, size_t n,
+                           double *lux, rad_error *err)
+{
+	return rad_solution_query(sol->sol, pts, n, sol->query_tol,
+	                          sol->solve_error, lux, NULL, err);
+}
+
 static void eval_run(srv *s, srv_task *t)
 {
 	eval_task *e = (eval_task *)t;
 	rad_error err = {0};
 	(void)s;
-	e->ok = rad_solution_illuminance(e->sol->sol, e->pts, e->n, e->lux,
-	                                 &err) == RAD_OK;
+	e->ok = eval_lux(e->sol, e->pts, e->n, e->lux, &err) == RAD_OK;
 	if (!e->ok)
 		snprintf(e->err, sizeof(e->err), "%s", err.msg);
 	/* the pool posts the task to the I/O thread: eval_done */
@@ -436,8 +443,7 @@ static void evaluate(srv *s, srv_job *j, mbp_job *p, size_t from)
 		return;
 	}
 	rad_error err = {0};
-	e->ok = rad_solution_illuminance(sol->sol, e->pts, n, e->lux, &err) ==
-	        RAD_OK;
+	e->ok = eval_lux(sol, e->pts, n, e->lux, &err) == RAD_OK;
 	if (!e->ok)
 		snprintf(e->err, sizeof(e->err), "%s", err.msg);
 	eval_apply(s, e);

@@ -26,9 +26,9 @@ typedef struct qs_share {
 	atomic_int refs;    /* the query and each helper queued */
 	atomic_size_t next; /* first point of the next chunk to claim */
 	size_t n;
-	const rad_solution *sol;
+	const srv_sol *sol;
 	const double *pts; /* 6 per point; read only by chunk owners */
-	double *lux;
+	double *lux, *error_lux;
 	pthread_mutex_t mu;
 	pthread_cond_t cv;
 	size_t done;       /* mu: points finished */
@@ -50,6 +50,13 @@ static void share_unref(qs_share *sh, int k)
 	free(sh);
 }
 
+static rad_status one_chunk(const srv_sol *sol, const double *pts, size_t n,
+                            double *lux, double *error_lux, rad_error *err)
+{
+	return rad_solution_query(sol->sol, pts, n, sol->query_tol,
+	                          sol->solve_error, lux, error_lux, err);
+}
+
 /* Claim and evaluate chunks until none is left. */
 static void take_chunks(qs_share *sh)
 {
@@ -59,8 +66,9 @@ static void take_chunks(qs_share *sh)
 			return;
 		size_t m = sh->n - b < QS_CHUNK ? sh->n - b : QS_CHUNK;
 		rad_error err = {0};
-		rad_status st = rad_solution_illuminance(
-		        sh->sol, sh->pts + 6 * b, m, sh->lux + b, &err);
+		rad_status st = one_chunk(
+		        sh->sol, sh->pts + 6 * b, m, sh->lux + b,
+		        sh->error_lux ? sh->error_lux + b : NULL, &err);
 		pthread_mutex_lock(&sh->mu);
 		if (st != RAD_OK && sh->status == RAD_OK) {
 			sh->status = st;
@@ -86,8 +94,8 @@ static void helper_done(srv *s, srv_task *t)
 	free(t);
 }
 
-rad_status srv_query_illuminance(srv *s, const rad_solution *sol,
-                                 const double *pts, size_t n, double *lux,
+rad_status srv_query_illuminance(srv *s, const srv_sol *sol, const double *pts,
+                                 size_t n, double *lux, double *error_lux,
                                  rad_error *err)
 {
 	size_t chunks = (n + QS_CHUNK - 1) / QS_CHUNK;
@@ -98,13 +106,14 @@ rad_status srv_query_illuminance(srv *s, const rad_solution *sol,
 		helpers = chunks - (chunks > 0);
 	qs_share *sh = helpers ? calloc(1, sizeof(*sh)) : NULL;
 	if (!sh) /* one chunk, one thread, or no memory: all here */
-		return rad_solution_illuminance(sol, pts, n, lux, err);
+		return one_chunk(sol, pts, n, lux, error_lux, err);
 	atomic_init(&sh->refs, (int)helpers + 1);
 	atomic_init(&sh->next, 0);
 	sh->n = n;
 	sh->sol = sol;
 	sh->pts = pts;
 	sh->lux = lux;
+	sh->error_lux = error_lux;
 	pthread_mutex_init(&sh->mu, NULL);
 	pthread_cond_init(&sh->cv, NULL);
 	for (size_t i = 0; i < helpers; i++) {

@@ -65,27 +65,36 @@ static json_t *reply_base(query_task *q)
 	return reply;
 }
 
+/* The array of n values, as a reply member. */
+static json_t *values_json(const double *v, size_t n)
+{
+	json_t *arr = json_array();
+	for (size_t i = 0; i < n; i++)
+		json_array_append_new(arr, srv_jreal(v[i]));
+	return arr;
+}
+
+/* lux holds 2 n values: the lux, then their error estimates. */
 static json_t *run_points(srv *s, query_task *q, double *lux, rad_error *err)
 {
-	if (srv_query_illuminance(s, q->sol->sol, q->pts, q->n, lux, err) !=
-	    RAD_OK)
+	if (srv_query_illuminance(s, q->sol, q->pts, q->n, lux, lux + q->n,
+	                          err) != RAD_OK)
 		return NULL;
-	json_t *reply = reply_base(q), *arr = json_array();
-	for (size_t i = 0; i < q->n; i++)
-		json_array_append_new(arr, srv_jreal(lux[i]));
-	json_object_set_new(reply, "lux", arr);
+	json_t *reply = reply_base(q);
+	json_object_set_new(reply, "lux", values_json(lux, q->n));
+	json_object_set_new(reply, "error_lux", values_json(lux + q->n, q->n));
 	return reply;
 }
 
 static json_t *run_grid(srv *s, query_task *q, double *lux, rad_error *err)
 {
-	if (srv_query_illuminance(s, q->sol->sol, q->pts, q->n, lux, err) !=
-	    RAD_OK)
+	if (srv_query_illuminance(s, q->sol, q->pts, q->n, lux, lux + q->n,
+	                          err) != RAD_OK)
 		return NULL;
-	json_t *reply = reply_base(q), *arr = json_array();
-	double mn = HUGE_VAL, mx = -HUGE_VAL, sum = 0;
+	json_t *reply = reply_base(q);
+	double mn = HUGE_VAL, mx = -HUGE_VAL, sum = 0, emax = 0;
 	for (size_t i = 0; i < q->n; i++) {
-		json_array_append_new(arr, srv_jreal(lux[i]));
+		emax = lux[q->n + i] > emax ? lux[q->n + i] : emax;
 		mn = lux[i] < mn ? lux[i] : mn;
 		mx = lux[i] > mx ? lux[i] : mx;
 		sum += lux[i];
@@ -94,7 +103,9 @@ static json_t *run_grid(srv *s, query_task *q, double *lux, rad_error *err)
 	json_object_set_new(reply, "nu", json_integer(q->nu));
 	json_object_set_new(reply, "nv", json_integer(q->nv));
 	json_object_set_new(reply, "spacing", srv_jreal(q->spacing));
-	json_object_set_new(reply, "lux", arr);
+	json_object_set_new(reply, "lux", values_json(lux, q->n));
+	json_object_set_new(reply, "error_lux", values_json(lux + q->n, q->n));
+	json_object_set_new(reply, "error_max", srv_jreal(emax));
 	json_object_set_new(reply, "min", srv_jreal(mn));
 	json_object_set_new(reply, "mean", srv_jreal(mean));
 	json_object_set_new(reply, "max", srv_jreal(mx));
@@ -210,7 +221,7 @@ static void query_run(srv *s, srv_task *t)
 	double *lux = NULL;
 
 	if (q->kind == Q_POINTS || q->kind == Q_GRID) {
-		lux = malloc((q->n ? q->n : 1) * sizeof(double));
+		lux = malloc((q->n ? 2 * q->n : 1) * sizeof(double));
 		if (!lux) {
 			err.code = RAD_ERR_NOMEM;
 			snprintf(err.msg, sizeof(err.msg),

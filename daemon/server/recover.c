@@ -162,6 +162,15 @@ static void restore_stats(srv_job *j, const char *text)
 	json_decref(st);
 }
 
+/* The error estimate of the restored statistics, 0 if none. */
+static double stats_error_estimate(const srv_job *j)
+{
+	json_t *st = j->stats_json ? json_loads(j->stats_json, 0, NULL) : NULL;
+	double e = json_number_value(json_object_get(st, "error_estimate"));
+	json_decref(st);
+	return e;
+}
+
 static void restore_solution(srv *s, srv_job *j)
 {
 	unsigned char *bytes = NULL;
@@ -181,7 +190,8 @@ static void restore_solution(srv *s, srv_job *j)
 		srv_warn("job %llu: checkpoint refused: %s",
 		         (unsigned long long)j->id, err.msg);
 	} else {
-		j->sol = srv_sol_new(s, sol, j->scene);
+		j->sol = srv_sol_new(s, sol, j->scene, j->opt.query_tol,
+		                     stats_error_estimate(j));
 	}
 	free(bytes);
 }

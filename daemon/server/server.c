@@ -434,6 +434,7 @@ int srv_init(srv *s, const srv_config *cfg, int argc, char **argv, char *msg,
 
 	long cores = sysconf(_SC_NPROCESSORS_ONLN);
 	int w = cfg->workers > 0 ? cfg->workers : 1;
+	s->accuracy = cfg->accuracy;
 	s->solver_threads = cfg->solver_threads > 0
 	                            ? cfg->solver_threads
 	                            : (int)(cores > w ? cores / w : 1);

@@ -90,10 +90,16 @@ struct srv_sol {
 	srv_scene *scene;  /* ref held: the solution reads the scene */
 	uint32_t iteration;
 	int64_t bytes; /* rad_solution_memory total, counted in s->sol_bytes */
+	double query_tol;   /* the job's query tolerance */
+	double solve_error; /* the solver's error_estimate then, >= 0 */
 };
 
-/* Wrap a solution (steals it; takes a scene ref); NULL on no memory. */
-srv_sol *srv_sol_new(srv *s, rad_solution *sol, srv_scene *sc);
+/*
+ * Wrap a solution (steals it; takes a scene ref); NULL on no memory.
+ * query_tol and solve_error: what queries of it use (rad_solution_query).
+ */
+srv_sol *srv_sol_new(srv *s, rad_solution *sol, srv_scene *sc, double query_tol,
+                     double solve_error);
 void srv_sol_ref(srv_sol *p);
 void srv_sol_unref(srv *s, srv_sol *p);
 
@@ -456,8 +462,8 @@ cmd_result srv_cmd_export(srv_req *r);
  * rad_solution_illuminance for one query, spread over the query threads
  * (qsplit.c); call from a query-pool task.  Same values as one call.
  */
-rad_status srv_query_illuminance(srv *s, const rad_solution *sol,
-                                 const double *pts, size_t n, double *lux,
+rad_status srv_query_illuminance(srv *s, const srv_sol *sol, const double *pts,
+                                 size_t n, double *lux, double *error_lux,
                                  rad_error *err);
 
 /* Persist a job's row on the store thread, then send reply (stolen);
@@ -574,6 +580,7 @@ struct srv {
 	char lock_path[4200];
 	int lock_fd;
 	int solver_threads; /* resolved default threads per job */
+	double accuracy;    /* default accuracy of jobs (config) */
 
 	/* inbox: any thread -> I/O thread */
 	pthread_mutex_t inbox_mu;

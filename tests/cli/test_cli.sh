@@ -66,6 +66,38 @@ test_usage_errors() {
 	expect_exit "--iterations with --converge exits 2" 2 "--converge"
 	run "$SCENE" --eps
 	expect_exit "missing option value exits 2" 2 "--eps"
+	run "$SCENE" --accuracy 0
+	expect_exit "zero accuracy exits 2" 2 "--accuracy"
+	run "$SCENE" --accuracy 0.9
+	expect_exit "accuracy above 0.5 exits 2" 2 "--accuracy"
+	run "$SCENE" --accuracy nan
+	expect_exit "NaN accuracy exits 2" 2 "--accuracy"
+}
+
+# --accuracy sets eps, the convergence and query tolerances together; an
+# expert knob given beside it wins, before or after it.
+test_accuracy() {
+	local args=(--json --iterations 1 --threads 1)
+	run "$SCENE" "${args[@]}" --accuracy 0.01
+	cp "$TMP/out" "$TMP/a1.json"
+	run "$SCENE" "${args[@]}" --eps 1e-3 --accuracy 0.01
+	cp "$TMP/out" "$TMP/a2.json"
+	run "$SCENE" "${args[@]}" --accuracy 0.01 --eps 1e-3
+	cp "$TMP/out" "$TMP/a3.json"
+	if "$PY" - "$TMP/a1.json" "$TMP/a2.json" "$TMP/a3.json" \
+		>"$TMP/err" 2>&1 <<'EOF'; then
+import json, sys
+a, b, c = (json.load(open(p)) for p in sys.argv[1:4])
+assert a["accuracy"] == 0.01 and a["query_tolerance"] == 0.005, a
+assert abs(a["eps"] - 2.5e-5) < 1e-12, a["eps"]
+assert abs(a["tolerance"] - 5e-4) < 1e-12, a["tolerance"]
+assert b["eps"] == c["eps"] == 1e-3, (b["eps"], c["eps"])
+assert b["query_tolerance"] == c["query_tolerance"] == 0.005
+EOF
+		pass "--accuracy sets eps and tolerances; --eps overrides it"
+	else
+		fail "--accuracy: $(cat "$TMP/err")"
+	fi
 }
 
 test_file_errors() {
@@ -109,7 +141,8 @@ check_json() {
 import json, math, sys
 path, npts, niter = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
 d = json.load(open(path))
-keys = ["illuminance_lux", "iterations", "seconds", "links", "elements",
+keys = ["illuminance_lux", "error_lux", "accuracy", "query_tolerance",
+        "query_seconds", "iterations", "seconds", "links", "elements",
         "memory_bytes", "solver", "eps", "converged", "error_estimate",
         "clusters", "leaves", "rays", "scene", "per_iteration"]
 missing = [k for k in keys if k not in d]
@@ -118,6 +151,11 @@ lux = d["illuminance_lux"]
 assert len(lux) == npts, "%d lux values" % len(lux)
 for v in lux:
     assert isinstance(v, (int, float)) and math.isfinite(v) and v >= 0, v
+err = d["error_lux"]
+assert len(err) == npts, "%d error values" % len(err)
+for v, e in zip(lux, err):
+    assert math.isfinite(e) and 0 <= e <= max(v, 1e-9), (v, e)
+assert d["accuracy"] == 0.02 and d["query_tolerance"] == 0.01, d["accuracy"]
 assert d["iterations"] == niter, d["iterations"]
 assert d["solver"] == "hr", d["solver"]
 mem = d["memory_bytes"]
@@ -198,7 +236,7 @@ EOF
 
 test_solve_text() {
 	run "$SCENE" --iterations 1 --eps "$EPS" --points "$TMP/good.pts"
-	if [[ $RC -eq 0 ]] && grep -q 'illuminance (lux)' "$TMP/out" &&
+	if [[ $RC -eq 0 ]] && grep -q 'illuminance (lux, +- estimated error' "$TMP/out" &&
 		grep -q 'memory by structure' "$TMP/out"; then
 		pass "text report has memory and illuminance sections"
 	else
@@ -208,6 +246,7 @@ test_solve_text() {
 
 test_help
 test_usage_errors
+test_accuracy
 test_file_errors
 test_solve_json
 test_glb

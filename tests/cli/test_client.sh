@@ -250,13 +250,15 @@ printf '# floor centre, back wall, left wall\n0.278 0.0 0.2796 0 1 0\n\n0.278 0.
 run query "$JOB" --points "$TMP/pts.txt"
 expect_exit "query --points" 0
 cp "$TMP/out" "$TMP/points.csv"
-check_py "points CSV: header, 3 rows, finite lux, lit floor" '
+check_py "points CSV: header, 3 rows, finite lux and error, lit floor" '
 import csv, math, sys
 rows = list(csv.reader(open(sys.argv[1])))
-assert rows[0] == ["x","y","z","nx","ny","nz","lux"], rows[0]
+assert rows[0] == ["x","y","z","nx","ny","nz","lux","error_lux"], rows[0]
 assert len(rows) == 4, rows
 lux = [float(r[6]) for r in rows[1:]]
+err = [float(r[7]) for r in rows[1:]]
 assert all(math.isfinite(v) and v >= 0 for v in lux), lux
+assert all(math.isfinite(e) and 0 <= e < max(v, 1) for v, e in zip(lux, err)), err
 assert lux[0] > 1, lux
 assert float(rows[2][1]) == 0.27, rows[2]
 ' "$TMP/points.csv"
@@ -315,9 +317,10 @@ check_py "grid: nu x nv rows, EN 12464-1 spacing, points inside the rectangle" '
 import csv, json, math, sys
 r = json.load(open(sys.argv[1]))
 rows = list(csv.reader(open(sys.argv[2])))
-assert rows[0] == ["i","j","x","y","z","lux"], rows[0]
+assert rows[0] == ["i","j","x","y","z","lux","error_lux"], rows[0]
 nu, nv = r["nu"], r["nv"]
-assert len(rows) - 1 == nu * nv == len(r["lux"]), (len(rows), nu, nv)
+assert len(rows) - 1 == nu * nv == len(r["lux"]) == len(r["error_lux"]), (len(rows), nu, nv)
+assert r["error_max"] == max(r["error_lux"]) and r["error_max"] < r["max"], r
 p = 0.2 * 5 ** math.log10(0.5592)
 assert abs(r["spacing"] - p) < 1e-6, r["spacing"]
 assert nu == math.ceil(0.556 / p) and nv == math.ceil(0.5592 / p), (nu, nv)

@@ -119,10 +119,19 @@ long long dm_query_points(dm_conn *c, const json_t *job, const double *pts,
 	if (!json_is_array(l) || json_array_size(l) != n)
 		dm_fail("query.points: \"lux\" is not an array of %zu numbers",
 		        n);
+	json_t *e = json_object_get(r, "error_lux");
+	if (!json_is_array(e) || json_array_size(e) != n)
+		dm_fail("query.points: \"error_lux\" is not an array of %zu "
+		        "numbers",
+		        n);
 	for (size_t i = 0; i < n; i++) {
-		json_t *v = json_array_get(l, i);
+		json_t *v = json_array_get(l, i), *ev = json_array_get(e, i);
 		if (!json_is_number(v))
 			dm_fail("query.points: lux[%zu] is not a number", i);
+		if (!json_is_number(ev) || !(json_number_value(ev) >= 0))
+			dm_fail("query.points: error_lux[%zu] is not a "
+			        "number >= 0",
+			        i);
 		lux[i] = json_number_value(v);
 	}
 	long long it = dm_int(r, "iteration");

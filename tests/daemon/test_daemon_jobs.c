@@ -107,25 +107,35 @@ static void test_job_lifecycle_follows_the_protocol(void **state)
 	assert_string_equal(json_string_value(dm_get(r, "state")), "paused");
 	json_t *job = json_incref(dm_get(r, "job"));
 	json_t *o = dm_get(r, "options");
-	static const char *const opts[] = {"eps",
-	                                   "variation",
-	                                   "min_edge_rel",
-	                                   "mesh_edge_rel",
-	                                   "clustering",
-	                                   "store",
-	                                   "study",
-	                                   "oracle",
-	                                   "threads",
-	                                   "rcv_samples",
-	                                   "vis_samples",
-	                                   "tol",
-	                                   "max_iterations",
-	                                   NULL};
+	static const char *const opts[] = {
+	        "accuracy",    "query_tol",    "eps",
+	        "variation",   "min_edge_rel", "mesh_edge_rel",
+	        "clustering",  "store",        "study",
+	        "oracle",      "threads",      "rcv_samples",
+	        "vis_samples", "tol",          "max_iterations",
+	        NULL};
 	dm_require_keys(o, "job.create options", opts);
 	assert_true(dm_num(o, "tol") == 1e-3);
+	assert_true(dm_num(o, "accuracy") == 0.02);
+	assert_true(dm_num(o, "query_tol") == 0.01);
 	assert_int_equal(dm_int(o, "max_iterations"), 100);
 	assert_int_equal(dm_int(o, "threads"), 1);
 	json_decref(r);
+
+	/* accuracy sets eps, tol and query_tol; eps beside it wins. */
+	r = dm_ok(c, "{s:s, s:O, s:{s:f, s:f}}", "cmd", "job.create", "scene",
+	          sc, "options", "eps", 1e-3, "accuracy", 0.01);
+	o = dm_get(r, "options");
+	assert_true(dm_num(o, "accuracy") == 0.01);
+	assert_true(dm_num(o, "eps") == 1e-3);
+	assert_true(fabs(dm_num(o, "tol") - 5e-4) < 1e-15);
+	assert_true(dm_num(o, "query_tol") == 0.005);
+	json_decref(dm_ok(c, "{s:s, s:O}", "cmd", "job.delete", "job",
+	                  dm_get(r, "job")));
+	json_decref(r);
+	json_decref(dm_err(c, "invalid", "{s:s, s:O, s:{s:f}}", "cmd",
+	                   "job.create", "scene", sc, "options", "accuracy",
+	                   0.9));
 
 	/* Before the first run: target none, no stats. */
 	r = dm_ok(c, "{s:s, s:O}", "cmd", "job.info", "job", job);
