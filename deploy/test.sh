@@ -25,7 +25,7 @@ TIMEOUT=${LUXRAD_TEST_TIMEOUT:-900}
 # test_daemon_jobs, _persist and _export are left out of this stage: under
 # TSan's slowdown their solves outlast the tests' deadlines (they run in
 # the other two stages).
-TSAN_TESTS='threads|direct|mem|cli|store|config|daemon_session'
+TSAN_TESTS='threads|direct|mem|cli|reference|store|config|daemon_session'
 TSAN_TESTS+='|daemon_badinput|daemon_query|mb_'
 JOBS=2
 

@@ -23,6 +23,10 @@
  *   float coordinates resolve at the scene's distance from the origin.
  * - Ray flags must be 0 and the mask all ones: Debian's Embree is built
  *   with ray masks, and mask 0 silently reports "never occluded".
+ * - rad_vis_first_hit_front() filters hits through a filter in its own
+ *   intersect context (RTC_SCENE_FLAG_CONTEXT_FILTER_FUNCTION), not on the
+ *   geometry: the other queries pass a context without a filter, so they
+ *   pay one not-taken branch per candidate hit and nothing else.
  */
 #include <float.h>
 #include <stdio.h>
@@ -181,7 +185,10 @@ static rad_status build_embree(rad_vis *v, uint32_t nverts, uint32_t ntris,
 	rtcCommitGeometry(g);
 	v->scene = rtcNewScene(v->device);
 	if (v->scene) {
-		rtcSetSceneFlags(v->scene, RTC_SCENE_FLAG_ROBUST);
+		rtcSetSceneFlags(
+		        v->scene,
+		        RTC_SCENE_FLAG_ROBUST |
+		                RTC_SCENE_FLAG_CONTEXT_FILTER_FUNCTION);
 		rtcSetSceneBuildQuality(v->scene, RTC_BUILD_QUALITY_MEDIUM);
 		rtcAttachGeometry(v->scene, g);
 	}
@@ -316,4 +323,86 @@ uint32_t rad_vis_first_hit(const rad_vis *v, v3 org, v3 dir, double tfar,
 		return UINT32_MAX;
 	*t = rh.ray.tfar;
 	return v->prim_poly[rh.hit.primID];
+}
+
+/*
+ * The context of rad_vis_first_hit_front: Embree's context first, so the
+ * filter can cast the pointer it is given back to the whole struct.
+ */
+typedef struct front_ctx {
+	struct RTCIntersectContext ctx;
+	const rad_vis *v;
+	v3 dir;             /* the ray's direction */
+	float back_t;       /* nearest back-face hit so far, or +inf */
+	unsigned back_prim; /* its primitive */
+} front_ctx;
+
+/* 1 if dir meets primitive prim from its front (e1 x e2, as built by
+ * fill_buffers; a parallelogram's second triangle has the same sense). */
+static int prim_front(const rad_vis *v, unsigned prim, v3 dir)
+{
+	const uint32_t *t = v->tris + 3 * (size_t)prim;
+	v3 a = v3_f(v->verts + 3 * (size_t)t[0]);
+	v3 e1 = v3_sub(v3_f(v->verts + 3 * (size_t)t[1]), a);
+	v3 e2 = v3_sub(v3_f(v->verts + 3 * (size_t)t[2]), a);
+	return v3_dot(v3_cross(e1, e2), dir) < 0;
+}
+
+/*
+ * Called for every candidate hit nearer than the current one, in no
+ * particular order.  Back faces are noted (the nearest one) and rejected,
+ * so the traversal goes on to find the nearest front face.  Offsets of the
+ * packet layout of rtcore_ray.h (its accessors are C++ only): tfar is
+ * float 8N + i of the ray, primID unsigned 5N + i of the hit; Embree has
+ * put the candidate's distance in tfar.
+ */
+static void front_filter(const struct RTCFilterFunctionNArguments *args)
+{
+	front_ctx *fc = (front_ctx *)args->context;
+	unsigned n = args->N;
+	for (unsigned i = 0; i < n; i++) {
+		if (args->valid[i] == 0)
+			continue;
+		unsigned prim = ((const unsigned *)args->hit)[5 * n + i];
+		if (prim_front(fc->v, prim, fc->dir))
+			continue;
+		float t = ((const float *)args->ray)[8 * n + i];
+		if (t < fc->back_t) {
+			fc->back_t = t;
+			fc->back_prim = prim;
+		}
+		args->valid[i] = 0;
+	}
+}
+
+uint32_t rad_vis_first_hit_front(const rad_vis *v, v3 org, v3 dir, double tnear,
+                                 double tfar, double *t, int *front)
+{
+	front_ctx fc = {.v = v, .dir = dir, .back_t = INFINITY};
+	rtcInitIntersectContext(&fc.ctx);
+	fc.ctx.filter = front_filter;
+	struct RTCRayHit rh;
+	memset(&rh, 0, sizeof(rh));
+	rh.ray.org_x = (float)org.x;
+	rh.ray.org_y = (float)org.y;
+	rh.ray.org_z = (float)org.z;
+	rh.ray.tnear = (float)tnear;
+	rh.ray.dir_x = (float)dir.x;
+	rh.ray.dir_y = (float)dir.y;
+	rh.ray.dir_z = (float)dir.z;
+	rh.ray.tfar = (float)tfar;
+	rh.ray.mask = 0xFFFFFFFFu;
+	rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+	rtcIntersect1(v->scene, &fc.ctx, &rh);
+	int hit = rh.hit.geomID != RTC_INVALID_GEOMETRY_ID;
+	/* A back face wins only when it lies clearly before the front. */
+	if (fc.back_t < INFINITY &&
+	    (!hit || (double)fc.back_t < (double)rh.ray.tfar - v->eps)) {
+		*t = fc.back_t;
+		*front = 0;
+		return v->prim_poly[fc.back_prim];
+	}
+	*front = hit;
+	*t = hit ? rh.ray.tfar : tfar;
+	return hit ? v->prim_poly[rh.hit.primID] : UINT32_MAX;
 }

@@ -54,4 +54,19 @@ int rad_vis_ray_free(const rad_vis *v, v3 a, const v3 *na, v3 d);
 uint32_t rad_vis_first_hit(const rad_vis *v, v3 org, v3 dir, double tfar,
                            double *t);
 
+/*
+ * Nearest hit for a path tracer over one-sided surfaces.  Real scenes
+ * write a two-sided face as two coincident triangles facing opposite
+ * ways, and Embree's choice between exactly coincident hits is arbitrary:
+ * here a back-face hit loses to a front-face hit up to eps (rad_vis_eps)
+ * behind it, so such a pair always shows its front.  The ray is
+ * org + t dir, dir unit, tnear < t < tfar (the caller offsets org off its
+ * surface).  Returns the polygon or UINT32_MAX for a miss; *t receives the
+ * distance (tfar on a miss), *front 1 when the ray meets the polygon's
+ * front side (e1 x e2 against dir).  Costs rad_vis_first_hit's existing
+ * callers nothing: the filter lives in this query's own context.
+ */
+uint32_t rad_vis_first_hit_front(const rad_vis *v, v3 org, v3 dir, double tnear,
+                                 double tfar, double *t, int *front);
+
 #endif
