@@ -165,20 +165,43 @@ static void heap_swap(piece *a, piece *b)
 	*b = t;
 }
 
-static void heap_push(gather *g, const piece *pc)
+/* Settle a piece as it is: its error is kept in the estimate. */
+static void settle(gather *g, const piece *pc)
 {
-	if (g->nheap == VIS_HEAP) {
-		/* Full: the newcomer is settled as it is, its error kept. */
-		if (pc->kind != PIECE_WHOLE)
-			g->errvis += pc->e;
-		return;
-	}
-	int i = g->nheap++;
-	g->heap[i] = *pc;
+	if (pc->kind != PIECE_WHOLE)
+		g->errvis += pc->e;
+}
+
+static void sift_up(gather *g, int i)
+{
 	while (i > 0 && g->heap[(i - 1) / 2].e < g->heap[i].e) {
 		heap_swap(&g->heap[(i - 1) / 2], &g->heap[i]);
 		i = (i - 1) / 2;
 	}
+}
+
+/*
+ * Full, the heap keeps the larger errors: the smallest held (a leaf of
+ * the heap, the second half of the array) or the newcomer is settled.
+ */
+static void heap_push(gather *g, const piece *pc)
+{
+	if (g->nheap < VIS_HEAP) {
+		g->heap[g->nheap] = *pc;
+		sift_up(g, g->nheap++);
+		return;
+	}
+	int m = VIS_HEAP / 2;
+	for (int i = m + 1; i < VIS_HEAP; i++)
+		if (g->heap[i].e < g->heap[m].e)
+			m = i;
+	if (g->heap[m].e >= pc->e) {
+		settle(g, pc);
+		return;
+	}
+	settle(g, &g->heap[m]);
+	g->heap[m] = *pc;
+	sift_up(g, m);
 }
 
 static piece heap_pop(gather *g)
@@ -271,8 +294,9 @@ static double visible_ff(gather *g, const rad_patch *s, double F, double w)
 	if (tried == 0 || (p > 0 && p < 1)) {
 		pc.kind = PIECE_PARTIAL;
 		pc.e = piece_error(w * F, p, tried);
-	} else {
-		pc.e = w * F / (tried + 2); /* provisional: see refine */
+	} else if (w * F > BIG_SHARE * g->tau * running(g)) {
+		/* Large so far (the total only grows): checked in refine. */
+		pc.e = w * F / (tried + 2);
 	}
 	if (pc.e > 0)
 		heap_push(g, &pc);
