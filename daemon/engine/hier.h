@@ -36,6 +36,31 @@
  *   dB radiosity still to transmit (reduced-memory solver); free for other
  *      solvers to use as "previous B" or "unshot radiosity".
  * Emission E and reflectance rho come from the polygon's material.
+ *
+ * Clusters are seen through their projected area (rad_cluster_proj).  The
+ * area polygons i (areas A_i, unit normals n_i) show in direction d is
+ *   P(d) = sum A_i max(0, n_i . d) = (N . d + Q(d)) / 2,
+ *   N = sum A_i n_i,  Q(d) = sum A_i |n_i . d|,
+ * and the even part Q is modelled from the second moment M = sum A_i n_i
+ * n_i^T as Q(d) = q sqrt(d^T M d), q chosen so that Q integrates over the
+ * sphere to 2 pi A as the true one does: q = A / (2 R_G(eigenvalues of
+ * M)), R_G Carlson's symmetric elliptic integral, the sphere mean of
+ * sqrt(d^T M d).  Exact for a flat cluster, one-sided (P = A cos+) or
+ * two-sided (P = A |cos| / 2: the coincident opposite pairs that MGF and
+ * many exporters write), and for a sphere-like one (A / 4 everywhere);
+ * always exact in total (P integrates to pi A), so a cluster neither
+ * makes nor loses energy.  Between those it is only a blend (a 3-face
+ * "U" shows 0.3 A outwards where it shows nothing), so rad_cluster_proj
+ * sums exact leaves and the models of clusters two levels down.
+ *
+ * The query reads clusters through rad_cluster_proj: with Sillion's
+ * isotropic model (A / 4 everywhere) it read a box of 16 x 16 emitting
+ * quads per face 24 % low, since a flat wall cluster shows up to A, not
+ * A / 4.  The solvers' links still use the isotropic model (hr_nodes.c):
+ * tried there, the projected-area model fixed that box lit by its own
+ * bounces (hr, rho 0.7: 68 % low -> 1.4 %) but took the bright hall from
+ * 1.8 % to 4.6 % mean error and rmb's 6-face closed boxes 15-25 % low;
+ * not understood yet, so not switched on.
  */
 #ifndef LUXRAD_HIER_H
 #define LUXRAD_HIER_H
@@ -64,6 +89,9 @@ typedef struct rad_elem {
 typedef struct rad_cluster {
 	float lo[3], hi[3];    /* bounding box of the contents */
 	float area;            /* total area of the polygons inside */
+	float n[3];            /* sum of area x unit normal, |n| <= area */
+	float m[6];            /* sum of area x n n^T: xx yy zz xy xz yz */
+	float q;               /* scale of the even part (DESIGN) */
 	uint32_t parent;       /* RAD_NONE for the root */
 	uint32_t child;        /* first of 2 child clusters, RAD_NONE = leaf */
 	uint32_t first, count; /* range of order[] covered */
@@ -170,6 +198,14 @@ static inline double rad_luma(const float c[3])
 uint32_t rad_link_new(rad_hier *h, uint32_t rcv, uint32_t src, float ff,
                       float spread);
 /* Head pointer of a node's received-links list (element or cluster). */
+/* Projected area of a cluster's polygons in unit direction d (DESIGN):
+ * exact over a leaf cluster's polygons, the moment model RAD_PROJ_DEPTH
+ * levels below an inner one (the sum of up to 4 models, each exact if it
+ * is a leaf). */
+#define RAD_PROJ_DEPTH 2
+double rad_cluster_proj(const rad_hier *h, const rad_cluster *c, double dx,
+                        double dy, double dz);
+
 uint32_t *rad_node_links(rad_hier *h, uint32_t tagged);
 
 #endif

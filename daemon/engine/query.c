@@ -22,8 +22,9 @@
  *     element luma(B) F, F the exact unoccluded point-to-polygon kernel
  *     (rad_ff_point_patch).  Children are visited nearest first so the
  *     running total grows early.
- *   evaluation: cluster: isotropic emitter of area A/4 at the box centre
- *     times the visibility of the centre; inner element: its four
+ *   evaluation: cluster: an emitter of its projected area towards x
+ *     (rad_cluster_proj) at the box centre times the visibility of the
+ *     centre; inner element: its four
  *     children's radiosity weighted by their own kernels (no extra rays)
  *     times its visible fraction; leaf: B times its visible kernel.
  *   visibility of a piece of source (a leaf, an element taken whole, an
@@ -49,7 +50,7 @@
  * an unsure piece its binomial error c sqrt(p (1 - p) / k) (c its share,
  * p its open fraction, k rays), added linearly (along one shadow edge the
  * errors have one sign); and, added in quadrature as independent errors:
- * a cluster taken as a whole half its share (one ray, isotropic model),
+ * a cluster taken as a whole half its share (one ray, projected-area model),
  * an inner element taken whole the difference its children's weighting
  * made (the next level's correction is of that order), a leaf the
  * difference between its radiosity and its parent's times its visible
@@ -492,15 +493,17 @@ static double box_distance(const rad_cluster *c, v3 x)
 	return sqrt(d2);
 }
 
-/* Isotropic cluster: area A/4 radiating B from its centre, seen or not
- * along one ray: half its share is the error estimate. */
+/* Cluster: its projected area towards x radiating B from its centre, seen
+ * or not along one ray: half its share is the error estimate. */
 static void eval_cluster(gather *g, const rad_cluster *c, double b, v3 ctr,
                          double d)
 {
 	double cosx = v3_dot(g->n, v3_sub(ctr, g->x)) / d;
 	if (cosx <= 0)
 		return;
-	double share = b * (c->area / 4) * cosx / (M_PI * d * d);
+	v3 u = v3_scale(v3_sub(g->x, ctr), 1 / d);
+	double share = b * rad_cluster_proj(g->h, c, u.x, u.y, u.z) * cosx /
+	               (M_PI * d * d);
 	add_error(g, share / 2);
 	if (rad_vis_segment(g->vis, g->x, &g->n, ctr, NULL))
 		g->total += share;

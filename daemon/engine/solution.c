@@ -31,7 +31,7 @@
 #include "solver.h"
 
 #define SOL_MAGIC 0x534c5852u /* "RXLS" little-endian: "luxrad solution" */
-#define SOL_VERSION 1u
+#define SOL_VERSION 2u        /* 2: clusters carry their orientation moments */
 
 struct rad_solution {
 	const rad_scene *scene;
