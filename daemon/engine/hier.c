@@ -129,36 +129,40 @@ static void sym3_eigen(const double m[6], double ev[3])
  */
 static double sphere_mean_sqrt(const double m[6])
 {
+	/* 12-point Gauss-Legendre on [0, 1]: nodes (1 +- x) / 2, weights w / 2
+	 * for the 6 positive nodes x of the rule on [-1, 1]. */
 	static const double x[6] = {0.1252334085114689, 0.3678314989981802,
 	                            0.5873179542866175, 0.7699026741943047,
 	                            0.9041172563704749, 0.9815606342467192};
 	static const double w[6] = {0.2491470458134028, 0.2334925365383548,
 	                            0.2031674267230659, 0.1600783285433462,
 	                            0.1069393259953184, 0.0471753363865118};
-	double ev[3], sum = 0;
+	double t[12], wt[12], c2[12], ev[3], sum = 0;
+	for (int i = 0; i < 6; i++) {
+		t[i] = 0.5 * (1 - x[5 - i]);
+		t[11 - i] = 0.5 * (1 + x[5 - i]);
+		wt[i] = wt[11 - i] = 0.5 * w[5 - i];
+	}
+	for (int j = 0; j < 12; j++) { /* azimuth pi/2 t: cos^2 */
+		double c = cos(0.5 * M_PI * t[j]);
+		c2[j] = c * c;
+	}
 	sym3_eigen(m, ev);
 	for (int k = 0; k < 3; k++)
 		ev[k] = fmax(ev[k], 0);
 	/* The largest along z: a flat cluster's integrand is then sqrt(l) z,
 	 * which the rule integrates exactly. */
 	if (ev[0] > ev[2]) {
-		double t = ev[0];
+		double tmp = ev[0];
 		ev[0] = ev[2];
-		ev[2] = t;
+		ev[2] = tmp;
 	}
 	for (int i = 0; i < 12; i++) {
-		/* Nodes on [0, 1]: (1 +- x) / 2, weights w / 2. */
-		double z = 0.5 * (1 + (i < 6 ? -x[5 - i] : x[i - 6]));
-		double wz = 0.5 * w[i < 6 ? 5 - i : i - 6];
-		double s2 = 1 - z * z;
+		double z = t[i], s2 = 1 - z * z;
 		for (int j = 0; j < 12; j++) {
-			double t = 0.5 * (1 + (j < 6 ? -x[5 - j] : x[j - 6]));
-			double wt = 0.5 * w[j < 6 ? 5 - j : j - 6];
-			double ph = 0.5 * M_PI * t;
-			double c = cos(ph), s = sin(ph);
-			double f = ev[0] * s2 * c * c + ev[1] * s2 * s * s +
+			double f = s2 * (ev[0] * c2[j] + ev[1] * (1 - c2[j])) +
 			           ev[2] * z * z;
-			sum += wz * wt * sqrt(f);
+			sum += wt[i] * wt[j] * sqrt(f);
 		}
 	}
 	return sum; /* the octant's area-mean: (1/(pi/2)) int dz dphi */
@@ -195,12 +199,13 @@ static rad_status build_cluster(rad_hier *h, uint32_t c, rad_error *err)
 		cl->n[k] = (float)n[k];
 	for (int k = 0; k < 6; k++)
 		cl->m[k] = (float)m[k];
-	double rg = sphere_mean_sqrt(m);
-	cl->q = rg > 0 ? (float)(area / (2 * rg)) : 0;
+	cl->q = 0; /* a leaf's projected area is summed exactly */
 	cl->child = RAD_NONE;
 	cl->links = RAD_NONE;
 	if (cl->count <= RAD_CLUSTER_LEAF_MAX)
 		return RAD_OK;
+	double rg = sphere_mean_sqrt(m);
+	cl->q = rg > 0 ? (float)(area / (2 * rg)) : 0;
 	int axis = 0;
 	for (int k = 1; k < 3; k++)
 		if (chi[k] - clo[k] > chi[axis] - clo[axis])

@@ -87,13 +87,13 @@ typedef struct rad_elem {
 } rad_elem;
 
 typedef struct rad_cluster {
-	float lo[3], hi[3];    /* bounding box of the contents */
-	float area;            /* total area of the polygons inside */
-	float n[3];            /* sum of area x unit normal, |n| <= area */
-	float m[6];            /* sum of area x n n^T: xx yy zz xy xz yz */
-	float q;               /* scale of the even part (DESIGN) */
-	uint32_t parent;       /* RAD_NONE for the root */
-	uint32_t child;        /* first of 2 child clusters, RAD_NONE = leaf */
+	float lo[3], hi[3]; /* bounding box of the contents */
+	float area;         /* total area of the polygons inside */
+	float n[3];         /* sum of area x unit normal, |n| <= area */
+	float m[6];         /* sum of area x n n^T: xx yy zz xy xz yz */
+	float q;            /* scale of the even part (DESIGN); 0 on leaves */
+	uint32_t parent;    /* RAD_NONE for the root */
+	uint32_t child;     /* first of 2 child clusters, RAD_NONE = leaf */
 	uint32_t first, count; /* range of order[] covered */
 	uint32_t links;        /* head of the links received */
 	float B[3], I[3], dB[3];
@@ -197,7 +197,6 @@ static inline double rad_luma(const float c[3])
 /* Link store: allocate one link (zeroed, child = RAD_NONE), or RAD_NONE. */
 uint32_t rad_link_new(rad_hier *h, uint32_t rcv, uint32_t src, float ff,
                       float spread);
-/* Head pointer of a node's received-links list (element or cluster). */
 /* Projected area of a cluster's polygons in unit direction d (DESIGN):
  * exact over a leaf cluster's polygons, the moment model RAD_PROJ_DEPTH
  * levels below an inner one (the sum of up to 4 models, each exact if it
@@ -206,6 +205,7 @@ uint32_t rad_link_new(rad_hier *h, uint32_t rcv, uint32_t src, float ff,
 double rad_cluster_proj(const rad_hier *h, const rad_cluster *c, double dx,
                         double dy, double dz);
 
+/* Head pointer of a node's received-links list (element or cluster). */
 uint32_t *rad_node_links(rad_hier *h, uint32_t tagged);
 
 #endif
