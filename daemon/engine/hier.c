@@ -404,6 +404,8 @@ static void reset_clusters(rad_hier *h, uint32_t id)
 {
 	rad_cluster *cl = rad_cluster_at(h, id);
 	memset(cl->I, 0, sizeof(cl->I));
+	memset(cl->V, 0, sizeof(cl->V));
+	cl->S = 0;
 	memset(cl->dB, 0, sizeof(cl->dB));
 	if (cl->child != RAD_NONE) {
 		reset_clusters(h, cl->child);
@@ -456,21 +458,36 @@ static void pull_elem(rad_hier *h, uint32_t id)
 static void pull_cluster(rad_hier *h, uint32_t id)
 {
 	rad_cluster *cl = rad_cluster_at(h, id);
-	double acc[6] = {0};
+	double acc[6] = {0}, nb[6] = {0};
 	if (cl->child != RAD_NONE) {
 		for (uint32_t k = 0; k < 2; k++) {
 			pull_cluster(h, cl->child + k);
 			const rad_cluster *ch =
 			        rad_cluster_at(h, cl->child + k);
 			acc_node(acc, ch->area, ch->B, ch->dB);
+			for (int c = 0; c < 3; c++) {
+				nb[c] += ch->nB[c];
+				nb[3 + c] += ch->ndB[c];
+			}
 		}
 	} else {
 		for (uint32_t j = cl->first; j < cl->first + cl->count; j++) {
 			const rad_elem *e = rad_elem_at(h, h->order[j]);
+			const float *n = h->scene->polys[h->order[j]].n;
+			double b = (double)e->area * rad_luma(e->B);
+			double d = (double)e->area * rad_luma(e->dB);
 			acc_node(acc, e->area, e->B, e->dB);
+			for (int c = 0; c < 3; c++) {
+				nb[c] += b * n[c];
+				nb[3 + c] += d * n[c];
+			}
 		}
 	}
 	set_avg(cl->B, cl->dB, acc, cl->area);
+	for (int c = 0; c < 3; c++) {
+		cl->nB[c] = (float)nb[c];
+		cl->ndB[c] = (float)nb[3 + c];
+	}
 }
 
 static void push_elem(rad_hier *h, uint32_t id, const float up[3],
@@ -487,28 +504,76 @@ static void push_elem(rad_hier *h, uint32_t id, const float up[3],
 		push_elem(h, e->child + k, e->I, leaf, ud);
 }
 
+/* Share weight w(n) per unit area of a polygon of normal n (hier.h). */
+static double shape_poly(const float n[3], const double V[3], double iso)
+{
+	double c = n[0] * V[0] + n[1] * V[1] + n[2] * V[2];
+	return (c > 0 ? c : 0) + iso;
+}
+
+/* w integrated over a cluster's polygons. */
+static double shape_cluster(const rad_hier *h, const rad_cluster *c,
+                            const double V[3], double vlen, double iso)
+{
+	double w = iso * c->area;
+	if (vlen > 0)
+		w += vlen * rad_cluster_proj(h, c, V[0] / vlen, V[1] / vlen,
+		                             V[2] / vlen);
+	return w;
+}
+
 static void push_cluster(rad_hier *h, uint32_t id, const float up[3],
-                         rad_leaf_update leaf, void *ud)
+                         const float upV[3], float upS, rad_leaf_update leaf,
+                         void *ud)
 {
 	rad_cluster *cl = rad_cluster_at(h, id);
-	for (int c = 0; c < 3; c++)
+	for (int c = 0; c < 3; c++) {
 		cl->I[c] += up[c];
+		cl->V[c] += upV[c];
+	}
+	cl->S += upS;
+	double V[3] = {cl->V[0], cl->V[1], cl->V[2]};
+	double vlen = sqrt(V[0] * V[0] + V[1] * V[1] + V[2] * V[2]);
+	double iso = 0.25 * fmax(0, cl->S - vlen);
+	float share[3];
 	if (cl->child != RAD_NONE) {
-		push_cluster(h, cl->child, cl->I, leaf, ud);
-		push_cluster(h, cl->child + 1, cl->I, leaf, ud);
+		const rad_cluster *k[2] = {rad_cluster_at(h, cl->child),
+		                           rad_cluster_at(h, cl->child + 1)};
+		double w[2], sum = 0;
+		for (int i = 0; i < 2; i++)
+			sum += w[i] = shape_cluster(h, k[i], V, vlen, iso);
+		for (int i = 0; i < 2; i++) {
+			/* No direction recorded (no light): the mean. */
+			double f =
+			        sum > 0 && k[i]->area > 0
+			                ? cl->area * w[i] / (sum * k[i]->area)
+			                : 1;
+			for (int c = 0; c < 3; c++)
+				share[c] = (float)(f * cl->I[c]);
+			push_cluster(h, cl->child + (uint32_t)i, share, cl->V,
+			             cl->S, leaf, ud);
+		}
 		return;
 	}
-	float quarter[3];
-	for (int c = 0; c < 3; c++)
-		quarter[c] = 0.25f * cl->I[c];
-	for (uint32_t j = cl->first; j < cl->first + cl->count; j++)
-		push_elem(h, h->order[j], quarter, leaf, ud);
+	double sum = 0;
+	for (uint32_t j = cl->first; j < cl->first + cl->count; j++) {
+		const rad_poly *p = &h->scene->polys[h->order[j]];
+		sum += p->area * shape_poly(p->n, V, iso);
+	}
+	for (uint32_t j = cl->first; j < cl->first + cl->count; j++) {
+		const rad_poly *p = &h->scene->polys[h->order[j]];
+		double f =
+		        sum > 0 ? cl->area * shape_poly(p->n, V, iso) / sum : 1;
+		for (int c = 0; c < 3; c++)
+			share[c] = (float)(f * cl->I[c]);
+		push_elem(h, h->order[j], share, leaf, ud);
+	}
 }
 
 void rad_hier_push(rad_hier *h, rad_leaf_update leaf, void *ud)
 {
 	const float zero[3] = {0, 0, 0};
-	push_cluster(h, 0, zero, leaf, ud);
+	push_cluster(h, 0, zero, zero, 0, leaf, ud);
 }
 
 void rad_hier_pull(rad_hier *h)
@@ -568,6 +633,21 @@ double rad_cluster_proj(const rad_hier *h, const rad_cluster *c, double dx,
                         double dy, double dz)
 {
 	return proj_at(h, c, dx, dy, dz, RAD_PROJ_DEPTH);
+}
+
+double rad_cluster_emit(const rad_hier *h, const rad_cluster *c, int delta,
+                        double dx, double dy, double dz)
+{
+	double p = rad_cluster_proj(h, c, dx, dy, dz);
+	const float *v = delta ? c->ndB : c->nB;
+	double mean = rad_luma(delta ? c->dB : c->B);
+	if (!(p > 1e-6 * c->area) || mean == 0)
+		return 1;
+	double odd = (v[0] * dx + v[1] * dy + v[2] * dz) / mean -
+	             (c->n[0] * dx + c->n[1] * dy + c->n[2] * dz);
+	double e = p + 0.5 * odd;
+	e = e < 0 ? 0 : e > c->area ? c->area : e;
+	return e / p > 4 ? 4 : e / p;
 }
 
 uint32_t *rad_node_links(rad_hier *h, uint32_t tagged)

@@ -31,8 +31,9 @@
  *   B  radiosity (exitance, lux); on inner nodes the area average of the
  *      leaves below (pull); on clusters the area average of contents.
  *   I  irradiance gathered by the node's own links this iteration.  On a
- *      cluster it is normal irradiance (isotropic receiver); pushing it to a
- *      polygon multiplies by 1/4 (the mean of cos+ over the sphere).
+ *      cluster it is the mean over its polygons' area (power / area: the
+ *      power a cluster takes from direction u is its projected area P(u)
+ *      times the normal irradiance), handed down by the push (below).
  *   dB radiosity still to transmit (reduced-memory solver); free for other
  *      solvers to use as "previous B" or "unshot radiosity".
  * Emission E and reflectance rho come from the polygon's material.
@@ -53,14 +54,40 @@
  * "U" shows 0.3 A outwards where it shows nothing), so rad_cluster_proj
  * sums exact leaves and the models of clusters two levels down.
  *
- * The query reads clusters through rad_cluster_proj: with Sillion's
- * isotropic model (A / 4 everywhere) it read a box of 16 x 16 emitting
- * quads per face 24 % low, since a flat wall cluster shows up to A, not
- * A / 4.  The solvers' links still use the isotropic model (hr_nodes.c):
- * tried there, the projected-area model fixed that box lit by its own
- * bounces (hr, rho 0.7: 68 % low -> 1.4 %) but took the bright hall from
- * 1.8 % to 4.6 % mean error and rmb's 6-face closed boxes 15-25 % low;
- * not understood yet, so not switched on.
+ * Solvers and the query both see clusters through rad_cluster_proj.
+ * Sillion's isotropic model (A / 4 in every direction, and 1/4 of a
+ * cluster's normal irradiance to each polygon inside) lost 59 % of the
+ * light of a closed box whose walls are 16 x 16 quads (rho 0.7): a flat
+ * wall cluster shows up to A to the wall facing it, not A / 4.
+ *
+ * Push.  A cluster knows the power it took (I times its area), not where
+ * it came from, and handing every polygon the mean (what the projected
+ * area alone allows) lights the backs of objects as much as their fronts:
+ * measured, that took the bright hall from 1.8 % to 4.6 % mean error.
+ * So the gather also records where the irradiance came from: V, the sum
+ * of (photopic) normal irradiance times the unit direction towards its
+ * source, and S, the sum of the normal irradiances (S >= |V|; a source
+ * too close to have one direction adds to S only).  A polygon of normal n
+ * is then given a share proportional to
+ *   w(n) = max(0, n . V) + (S - |V|) / 4,
+ * the exact cos+ law for light from one direction plus Sillion's 1/4 for
+ * what cancels out, and the shares are scaled so that the polygons take
+ * exactly the power the cluster took: the push moves energy, it never
+ * makes or loses any.  A child cluster's share is w integrated over its
+ * polygons, P_child(V) + (S - |V|) A_child / 4.
+ *
+ * Emission.  A cluster sends sum A_i B_i max(0, n_i . d) / pi towards d,
+ * not its mean B times P(d): a wall written as two coincident faces, lit
+ * on one side only, sends with its lit face (B A_lit cos+), where the mean
+ * (half of it) times P (A_lit |cos|) gives half of that, and as much
+ * through the wall (measured: rmb took 31 % too little of the office's
+ * second bounce).  The pull keeps nB = sum A_i luma(B_i) n_i (and ndB for
+ * dB), the odd part of the exact sum, and the even part stays the mean
+ * times the projected area's: the sent light is mean B times
+ *   e(d) = P(d) + (nB / luma(B) - N) . d / 2,
+ * exact for flat clusters lit on either side or both, clamped to
+ * 0 .. A.  rad_cluster_emit returns e(d) / P(d) (at most 4), the factor
+ * a link's form factor, made for uniform radiosity, is used with.
  */
 #ifndef LUXRAD_HIER_H
 #define LUXRAD_HIER_H
@@ -97,6 +124,8 @@ typedef struct rad_cluster {
 	uint32_t first, count; /* range of order[] covered */
 	uint32_t links;        /* head of the links received */
 	float B[3], I[3], dB[3];
+	float V[3], S;       /* where I came from (DESIGN, push); with I */
+	float nB[3], ndB[3]; /* sum of area x luma(B or dB) x normal (pull) */
 } rad_cluster;
 
 enum {
@@ -173,10 +202,9 @@ void rad_hier_reset_emission(rad_hier *h);
 void rad_hier_pull(rad_hier *h);
 
 /*
- * Push: add each node's I to its children's, down the cluster tree (a
- * polygon gets its leaf cluster's I times 1/4, the sphere average of cos+
- * for the isotropic receiver) and the quadtrees, and call leaf() on every
- * surface leaf with its total irradiance in e->I.
+ * Push: add each node's I to its children's, down the cluster tree (each
+ * child its share by orientation, DESIGN) and the quadtrees, and call
+ * leaf() on every surface leaf with its total irradiance in e->I.
  */
 typedef void (*rad_leaf_update)(rad_hier *h, rad_elem *leaf, void *ud);
 void rad_hier_push(rad_hier *h, rad_leaf_update leaf, void *ud);
@@ -204,6 +232,28 @@ uint32_t rad_link_new(rad_hier *h, uint32_t rcv, uint32_t src, float ff,
 #define RAD_PROJ_DEPTH 2
 double rad_cluster_proj(const rad_hier *h, const rad_cluster *c, double dx,
                         double dy, double dz);
+
+/*
+ * What cluster c sends towards unit d, relative to its mean radiosity
+ * times P(d) (DESIGN, emission): B when delta is 0, dB when 1.
+ */
+double rad_cluster_emit(const rad_hier *h, const rad_cluster *c, int delta,
+                        double dx, double dy, double dz);
+
+/*
+ * Record on cluster c that it took irradiance of photopic value e (normal
+ * irradiance, lux) from unit direction (dx, dy, dz); a zero direction
+ * counts as no direction (DESIGN, push).
+ */
+static inline void rad_cluster_took(rad_cluster *c, double e, double dx,
+                                    double dy, double dz)
+{
+	e = e < 0 ? -e : e;
+	c->V[0] += (float)(e * dx);
+	c->V[1] += (float)(e * dy);
+	c->V[2] += (float)(e * dz);
+	c->S += (float)e;
+}
 
 /* Head pointer of a node's received-links list (element or cluster). */
 uint32_t *rad_node_links(rad_hier *h, uint32_t tagged);

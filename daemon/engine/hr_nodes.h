@@ -3,8 +3,8 @@
  * solvers: a tagged id is a surface element, a cluster or a light, and the
  * refinement code asks each the same questions (where, how big, how
  * bright, can it split, what are its children) and gets form factors for
- * any pair.  Cluster transfers use the isotropic volume model of
- * ALGORITHM.md §2 (emitter factor 1, receiver factor 1, area A/4).
+ * any pair.  Clusters are seen through their projected area (hier.h),
+ * not the isotropic volume of ALGORITHM.md §2 (area A/4 everywhere).
  */
 #ifndef LUXRAD_HR_NODES_H
 #define LUXRAD_HR_NODES_H
@@ -93,6 +93,19 @@ rad_status node_refine_failed(const rad_solver *sv, rad_status rs,
  */
 rad_status node_step_end(rad_solver *sv, const uint64_t *rays, int cancelled,
                          rad_error *err);
+/*
+ * The factor a link's form factor is used with when src is a cluster: what
+ * it sends towards rcv against its mean radiosity (delta: dB) times its
+ * projected area (rad_cluster_emit); 1 for any other source.
+ */
+double node_emit_factor(const rad_hier *h, uint32_t rcv, uint32_t src,
+                        int delta);
+/*
+ * After a gather of photopic value e (power per unit area) by a cluster
+ * receiver from src: record its direction for the push (hier.h).  Does
+ * nothing for a surface receiver.  Not thread-safe per receiver.
+ */
+void node_took(rad_hier *h, uint32_t rcv, uint32_t src, double e);
 /* Surface area of a node (0 for a light). */
 double node_area(const rad_hier *h, uint32_t t);
 #endif

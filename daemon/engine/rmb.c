@@ -247,8 +247,8 @@ static double mark_black(rad_solver *sv, uint32_t id)
  * (ALGORITHM.md §4.3.4: F_p = sum of weight x F_c).  After the first
  * iteration only reflecting polygons transmit or use what they receive,
  * so both averages run over reflecting area: a split receiver gives the
- * mean over its reflecting children (times 4 from a cluster to a polygon,
- * whose share of a cluster's irradiance is 1/4); a split source, the sum
+ * mean over its reflecting children (a cluster's irradiance is the mean of
+ * its polygons', hier.h); a split source, the sum
  * over its children scaled by their reflecting fractions, so that F_p
  * times the source's area-mean dB is exact when dB is uniform over the
  * reflecting part (sources inside a cluster keep dB = 0).
@@ -261,8 +261,6 @@ static double child_weight(const rad_solver *sv, const rad_link *p,
 	if (c->rcv != p->rcv) {
 		double a = node_arefl(sv, p->rcv);
 		w *= a > 0 ? node_arefl(sv, c->rcv) / a : 0;
-		if (node_is_cluster(p->rcv) && !node_is_cluster(c->rcv))
-			w *= 4;
 	}
 	if (c->src != p->src) {
 		double fp = node_arefl(sv, p->src) / node_area(h, p->src);
@@ -492,8 +490,10 @@ static rad_status gather(rad_solver *sv, uint32_t r, uint32_t s, double ff,
 	node_dB(sv, s, d);
 	float *I = node_is_cluster(r) ? rad_cluster_at(&sv->h, r)->I
 	                              : rad_elem_at(&sv->h, r)->I;
+	double fe = ff * node_emit_factor(&sv->h, r, s, 1);
 	for (int c = 0; c < 3; c++)
-		I[c] += (float)(ff * d[c]);
+		I[c] += (float)(fe * d[c]);
+	node_took(&sv->h, r, s, fe * luma3(d));
 	double b = fabs(luma3(d));
 	if (!node_is_cluster(r)) {
 		rad_status rs = track_err(sv, st, r, link_err(sv, b, spread));
@@ -935,6 +935,8 @@ static void zero_I(rad_hier *h, uint32_t t)
 	if (node_is_cluster(t)) {
 		rad_cluster *c = rad_cluster_at(h, t);
 		memset(c->I, 0, sizeof(c->I));
+		memset(c->V, 0, sizeof(c->V));
+		c->S = 0;
 		if (c->child != RAD_NONE) {
 			zero_I(h, (c->child) | RAD_TAG_CLUSTER);
 			zero_I(h, (c->child + 1) | RAD_TAG_CLUSTER);
@@ -1009,9 +1011,9 @@ static void node_power(const rad_hier *h, uint32_t id, double P[3])
 static void cluster_power(const rad_hier *h, uint32_t id, double P[3])
 {
 	const rad_cluster *c = rad_cluster_at(h, id);
-	/* A polygon takes 1/4 of its cluster's irradiance (hier.h). */
+	/* Each polygon takes its cluster's irradiance (hier.h). */
 	for (int k = 0; k < 3; k++)
-		P[k] += 0.25 * (double)c->area * c->I[k];
+		P[k] += (double)c->area * c->I[k];
 	if (c->child != RAD_NONE) {
 		cluster_power(h, c->child | RAD_TAG_CLUSTER, P);
 		cluster_power(h, (c->child + 1) | RAD_TAG_CLUSTER, P);

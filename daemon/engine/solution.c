@@ -31,7 +31,9 @@
 #include "solver.h"
 
 #define SOL_MAGIC 0x534c5852u /* "RXLS" little-endian: "luxrad solution" */
-#define SOL_VERSION 2u        /* 2: clusters carry their orientation moments */
+#define SOL_VERSION                                                            \
+	3u /* 2: clusters carry their orientation moments; 3:                  \
+	    * and where their irradiance came from */
 
 struct rad_solution {
 	const rad_scene *scene;
