@@ -83,6 +83,7 @@
 #define BIG_SHARE 0.25 /* agreeing pieces above this x tau x total: split */
 #define POINT_GRAIN 4  /* points per parallel chunk */
 #define NOISE_REL 1e-6 /* B - E below this share of E is float noise */
+#define NEAR_MAX 8     /* near leaves read finer per point, at most */
 
 /*
  * A piece of source whose visible fraction is not settled: w its
@@ -101,6 +102,13 @@ enum {
 	PIECE_WHOLE,   /* rays agree: only a large top piece is checked */
 };
 
+/* A leaf near the point whose radiosity may vary across what x sees. */
+typedef struct near {
+	rad_patch s;
+	double r, irr; /* its reflected radiosity, its mean irradiance */
+	double c, e;   /* what it added (r x visible kernel), its error */
+} near;
+
 typedef struct gather {
 	const rad_hier *h;
 	const rad_vis *vis;
@@ -111,9 +119,14 @@ typedef struct gather {
 	double err2;   /* sum of squared independent error estimates */
 	double errvis; /* visibility error given up on (heap full, depth) */
 	double direct; /* of total: lights and emission (not reflected) */
+	int nested;    /* 1 inside a near leaf's own gather (no deeper) */
 	piece heap[VIS_HEAP]; /* max-heap on e */
 	int nheap;
+	near near[NEAR_MAX]; /* near leaves to read finer (near_leaves) */
+	int nnear;
 } gather;
+
+static double gather_point(gather *g);
 
 static double luma_d(const double c[3])
 {
@@ -404,6 +417,76 @@ static double reflected(const rad_elem *e, const float E[3])
 	return rad_luma(R);
 }
 
+/*
+ * Near leaves.  A leaf's radiosity is a mean over a piece that a point
+ * near it sees unevenly: a wall near a floor corner is darker at the
+ * corner than on average, and a point there read the mean (the Cornell
+ * box's floor corner, 6.6 % high).  A leaf closer to x than its size whose
+ * error (the difference from its parent's radiosity, gather_elem) matters
+ * is kept here, the largest errors first; once the point's total is known
+ * (near_leaves), those still over half of tau x total are read at their
+ * quarters' centres by a gather of the solution there (one level: nested
+ * gathers read leaves as they are), and x's kernel over the quarters
+ * weights what each found.
+ */
+static void near_add(gather *g, const rad_patch *p, double r, double irr,
+                     double c, double e)
+{
+	int k = g->nnear;
+	if (k == NEAR_MAX) {
+		k = 0; /* replace the smallest error, if smaller */
+		for (int i = 1; i < NEAR_MAX; i++)
+			if (g->near[i].c < g->near[k].c)
+				k = i;
+		if (g->near[k].c >= c)
+			return;
+	} else {
+		g->nnear++;
+	}
+	near *n = &g->near[k];
+	n->s = *p;
+	n->r = r;
+	n->irr = irr;
+	n->c = c;
+	n->e = e;
+}
+
+static void near_leaves(gather *g)
+{
+	for (int i = 0; i < g->nnear; i++) {
+		near *n = &g->near[i];
+		if (n->c <= g->tau * g->total)
+			continue;
+		rad_patch q[4];
+		patch_quarters(&n->s, q);
+		/* An error in a quarter's irradiance weighs c / total in x's.
+		 */
+		double tau = fmin(0.25, 0.5 * g->tau * g->total / n->c);
+		double wf = 0, f = 0;
+		for (int k = 0; k < 4; k++) {
+			double fk = rad_ff_point_patch(g->x, g->n, &q[k]);
+			if (!(fk > 0))
+				continue;
+			gather in; /* on the stack: only one level deep */
+			in.h = g->h;
+			in.vis = g->vis;
+			in.x = rad_patch_centroid(&q[k]);
+			in.n = q[k].n;
+			in.tau = tau;
+			in.floor = g->floor;
+			in.nested = 1;
+			wf += fk * gather_point(&in);
+			f += fk;
+		}
+		if (!(f > 0))
+			continue;
+		double fix = n->c * (wf / (f * n->irr) - 1);
+		g->total += fix;
+		/* The leaf's error is now what reading it finer changed. */
+		g->err2 = fmax(0, g->err2 - n->e * n->e) + fix * fix;
+	}
+}
+
 /* The reflected radiosity B - E of element id and below (E: the uniform
  * emission already counted exactly on the whole polygon, or zero; rp: the
  * parent's B - E, or -1 for a root). */
@@ -424,8 +507,14 @@ static void gather_elem(gather *g, uint32_t id, const float E[3], double rp)
 	if (e->child == RAD_NONE) {
 		double fv = visible_ff(g, &p, F, r);
 		g->total += r * fv;
-		if (rp >= 0)
-			add_error(g, fabs(r - rp) * fv);
+		if (rp < 0)
+			return;
+		double el = fabs(r - rp) * fv, irr = rad_luma(e->I);
+		add_error(g, el);
+		if (!g->nested && el > 0 && irr > 0 &&
+		    v3_len(v3_sub(rad_patch_centroid(&p), g->x)) <
+		            patch_size(&p))
+			near_add(g, &p, r, irr, r * fv, el);
 		return;
 	}
 	double d = v3_len(v3_sub(rad_patch_centroid(&p), g->x));
@@ -502,7 +591,8 @@ static void eval_cluster(gather *g, const rad_cluster *c, double b, v3 ctr,
 	if (cosx <= 0)
 		return;
 	v3 u = v3_scale(v3_sub(g->x, ctr), 1 / d);
-	double share = b * rad_cluster_proj(g->h, c, u.x, u.y, u.z) * cosx /
+	double share = b * rad_cluster_proj(g->h, c, u.x, u.y, u.z) *
+	               rad_cluster_emit(g->h, c, 0, u.x, u.y, u.z) * cosx /
 	               (M_PI * d * d);
 	add_error(g, share / 2);
 	if (rad_vis_segment(g->vis, g->x, &g->n, ctr, NULL))
@@ -554,27 +644,37 @@ typedef struct query {
 	double floor, tau, solve_error;
 } query;
 
+/* Photopic illuminance at g->x: lights, then the gather (g: h, vis, x,
+ * n, tau, floor and nested set; the rest is set here). */
+static double gather_point(gather *g)
+{
+	const rad_scene *s = g->h->scene;
+	g->total = g->err2 = g->errvis = 0;
+	g->nheap = g->nnear = 0;
+	for (uint32_t l = 0; l < s->nlights; l++) {
+		const rad_light *L = &s->lights[l];
+		g->total += rad_light_point(s->vis, L, g->x, g->n, NULL) *
+		            luma_d(L->intensity);
+	}
+	g->direct = g->total;
+	if (s->npolys > 0)
+		gather_cluster(g, 0 | RAD_TAG_CLUSTER);
+	refine(g);
+	near_leaves(g);
+	return g->total;
+}
+
 static double point_lux(const query *q, v3 x, v3 n, double *error)
 {
-	const rad_scene *s = q->scene;
 	gather g; /* not zeroed as a whole: the heap is large */
 	g.h = q->h;
-	g.vis = s->vis;
+	g.vis = q->scene->vis;
 	g.x = x;
 	g.n = n;
 	g.tau = q->tau;
 	g.floor = q->floor;
-	g.total = g.err2 = g.errvis = 0;
-	g.nheap = 0;
-	for (uint32_t l = 0; l < s->nlights; l++) {
-		const rad_light *L = &s->lights[l];
-		g.total += rad_light_point(s->vis, L, x, n, NULL) *
-		           luma_d(L->intensity);
-	}
-	g.direct = g.total;
-	if (s->npolys > 0)
-		gather_cluster(&g, 0 | RAD_TAG_CLUSTER);
-	refine(&g);
+	g.nested = 0;
+	gather_point(&g);
 	*error = sqrt(g.err2) + g.errvis +
 	         q->solve_error * fmax(g.total - g.direct, 0);
 	return g.total;
