@@ -490,18 +490,37 @@ static void pull_cluster(rad_hier *h, uint32_t id)
 	}
 }
 
-static void push_elem(rad_hier *h, uint32_t id, const float up[3],
-                      rad_leaf_update leaf, void *ud)
+/* One push: the leaf update, the optional payload and its user data. */
+typedef struct push_ctx {
+	rad_hier *h;
+	rad_leaf_update leaf;
+	rad_push_extra extra;
+	void *ud;
+} push_ctx;
+
+/* x = up + the node's own payload (zeros without a payload). */
+static void extra_add(const push_ctx *p, uint32_t tagged, const float up[],
+                      float x[RAD_PUSH_EXTRA])
 {
-	rad_elem *e = rad_elem_at(h, id);
+	const float *own = p->extra ? p->extra(p->h, tagged, p->ud) : NULL;
+	for (int k = 0; k < RAD_PUSH_EXTRA; k++)
+		x[k] = up[k] + (own ? own[k] : 0);
+}
+
+static void push_elem(const push_ctx *p, uint32_t id, const float up[3],
+                      const float upx[RAD_PUSH_EXTRA])
+{
+	rad_elem *e = rad_elem_at(p->h, id);
+	float x[RAD_PUSH_EXTRA];
+	extra_add(p, id, upx, x);
 	for (int c = 0; c < 3; c++)
 		e->I[c] += up[c];
 	if (e->child == RAD_NONE) {
-		leaf(h, e, ud);
+		p->leaf(p->h, e, p->extra ? x : NULL, p->ud);
 		return;
 	}
 	for (uint32_t k = 0; k < 4; k++)
-		push_elem(h, e->child + k, e->I, leaf, ud);
+		push_elem(p, e->child + k, e->I, x);
 }
 
 /* Share weight w(n) per unit area of a polygon of normal n (hier.h). */
@@ -522,11 +541,24 @@ static double shape_cluster(const rad_hier *h, const rad_cluster *c,
 	return w;
 }
 
-static void push_cluster(rad_hier *h, uint32_t id, const float up[3],
-                         const float upV[3], float upS, rad_leaf_update leaf,
-                         void *ud)
+/* Hand a share f of a cluster's I and payload to a child. */
+static void share_of(double f, const float I[3], const float x[], float si[3],
+                     float sx[RAD_PUSH_EXTRA])
 {
+	for (int c = 0; c < 3; c++)
+		si[c] = (float)(f * I[c]);
+	for (int k = 0; k < RAD_PUSH_EXTRA; k++)
+		sx[k] = (float)(f * x[k]);
+}
+
+static void push_cluster(const push_ctx *p, uint32_t id, const float up[3],
+                         const float upV[3], float upS,
+                         const float upx[RAD_PUSH_EXTRA])
+{
+	rad_hier *h = p->h;
 	rad_cluster *cl = rad_cluster_at(h, id);
+	float x[RAD_PUSH_EXTRA], si[3], sx[RAD_PUSH_EXTRA];
+	extra_add(p, id | RAD_TAG_CLUSTER, upx, x);
 	for (int c = 0; c < 3; c++) {
 		cl->I[c] += up[c];
 		cl->V[c] += upV[c];
@@ -535,7 +567,6 @@ static void push_cluster(rad_hier *h, uint32_t id, const float up[3],
 	double V[3] = {cl->V[0], cl->V[1], cl->V[2]};
 	double vlen = sqrt(V[0] * V[0] + V[1] * V[1] + V[2] * V[2]);
 	double iso = 0.25 * fmax(0, cl->S - vlen);
-	float share[3];
 	if (cl->child != RAD_NONE) {
 		const rad_cluster *k[2] = {rad_cluster_at(h, cl->child),
 		                           rad_cluster_at(h, cl->child + 1)};
@@ -548,32 +579,32 @@ static void push_cluster(rad_hier *h, uint32_t id, const float up[3],
 			        sum > 0 && k[i]->area > 0
 			                ? cl->area * w[i] / (sum * k[i]->area)
 			                : 1;
-			for (int c = 0; c < 3; c++)
-				share[c] = (float)(f * cl->I[c]);
-			push_cluster(h, cl->child + (uint32_t)i, share, cl->V,
-			             cl->S, leaf, ud);
+			share_of(f, cl->I, x, si, sx);
+			push_cluster(p, cl->child + (uint32_t)i, si, cl->V,
+			             cl->S, sx);
 		}
 		return;
 	}
 	double sum = 0;
 	for (uint32_t j = cl->first; j < cl->first + cl->count; j++) {
-		const rad_poly *p = &h->scene->polys[h->order[j]];
-		sum += p->area * shape_poly(p->n, V, iso);
+		const rad_poly *q = &h->scene->polys[h->order[j]];
+		sum += q->area * shape_poly(q->n, V, iso);
 	}
 	for (uint32_t j = cl->first; j < cl->first + cl->count; j++) {
-		const rad_poly *p = &h->scene->polys[h->order[j]];
+		const rad_poly *q = &h->scene->polys[h->order[j]];
 		double f =
-		        sum > 0 ? cl->area * shape_poly(p->n, V, iso) / sum : 1;
-		for (int c = 0; c < 3; c++)
-			share[c] = (float)(f * cl->I[c]);
-		push_elem(h, h->order[j], share, leaf, ud);
+		        sum > 0 ? cl->area * shape_poly(q->n, V, iso) / sum : 1;
+		share_of(f, cl->I, x, si, sx);
+		push_elem(p, h->order[j], si, sx);
 	}
 }
 
-void rad_hier_push(rad_hier *h, rad_leaf_update leaf, void *ud)
+void rad_hier_push(rad_hier *h, rad_leaf_update leaf, rad_push_extra extra,
+                   void *ud)
 {
-	const float zero[3] = {0, 0, 0};
-	push_cluster(h, 0, zero, zero, 0, leaf, ud);
+	const float zero[RAD_PUSH_EXTRA > 3 ? RAD_PUSH_EXTRA : 3] = {0};
+	push_ctx p = {h, leaf, extra, ud};
+	push_cluster(&p, 0, zero, zero, 0, zero);
 }
 
 void rad_hier_pull(rad_hier *h)

@@ -205,9 +205,17 @@ void rad_hier_pull(rad_hier *h);
  * Push: add each node's I to its children's, down the cluster tree (each
  * child its share by orientation, DESIGN) and the quadtrees, and call
  * leaf() on every surface leaf with its total irradiance in e->I.
+ * A solver may push a payload of RAD_PUSH_EXTRA floats per node with it
+ * (extra: the node's own, or NULL for none), shared out and summed as I
+ * is; the leaf gets the total (NULL when extra is NULL).
  */
-typedef void (*rad_leaf_update)(rad_hier *h, rad_elem *leaf, void *ud);
-void rad_hier_push(rad_hier *h, rad_leaf_update leaf, void *ud);
+#define RAD_PUSH_EXTRA 4
+typedef const float *(*rad_push_extra)(const rad_hier *h, uint32_t tagged,
+                                       void *ud);
+typedef void (*rad_leaf_update)(rad_hier *h, rad_elem *leaf, const float *extra,
+                                void *ud);
+void rad_hier_push(rad_hier *h, rad_leaf_update leaf, rad_push_extra extra,
+                   void *ud);
 
 /* Material of the polygon an element belongs to. */
 static inline const rad_material *rad_elem_mat(const rad_hier *h,

@@ -1070,8 +1070,9 @@ static double energy_bound(rad_solver *sv)
 }
 
 /* A leaf's update: dB = rho I, B += dB. */
-static void update_leaf(rad_hier *h, rad_elem *e, void *ud)
+static void update_leaf(rad_hier *h, rad_elem *e, const float *extra, void *ud)
 {
+	(void)extra;
 	push_acc *acc = ud;
 	const rad_material *m = rad_elem_mat(h, e);
 	for (int c = 0; c < 3; c++) {
@@ -1184,7 +1185,7 @@ static rad_status rmb_step(rad_solver *sv, rad_error *err)
 		energy_bound(sv);
 	rad_solver_progress(sv, 0.9);
 	push_acc acc = {0, 0};
-	rad_hier_push(h, update_leaf, &acc);
+	rad_hier_push(h, update_leaf, NULL, &acc);
 	rad_hier_pull(h);
 	st->iter++;
 	st->mean_dB = acc.change / sv->scene->total_area;
