@@ -480,7 +480,17 @@ static void near_leaves(gather *g)
 		}
 		if (!(f > 0))
 			continue;
-		double fix = n->c * (wf / (f * n->irr) - 1);
+		/* Only a darker view is taken: the quarters' gathers sit on
+		 * the leaf and see what the leaf's own links averaged away,
+		 * and where they read more than its mean they were seeing
+		 * through gaps between two-sided faces (measured: a point
+		 * 0.1 m from a wall of the Graz office, +17 % -> +86 %).  The
+		 * case this is for, a leaf darker near a corner x is near,
+		 * only darkens; under half the mean is not believed either. */
+		double ratio = wf / (f * n->irr);
+		if (!(ratio >= 0.5 && ratio <= 1))
+			continue;
+		double fix = n->c * (ratio - 1);
 		g->total += fix;
 		/* The leaf's error is now what reading it finer changed. */
 		g->err2 = fmax(0, g->err2 - n->e * n->e) + fix * fix;
