@@ -607,6 +607,21 @@ static void build_room(scene *sc, const params *p)
 	           2 * s, s);
 }
 
+/* The black room with a black 0.8 x 0.02 x 1.2 m plate hung 0.5 m under
+ * the panel, off its centre: from the floor the panel is whole, partly
+ * hidden or gone (the CIE 171:2006 test 5.7 kind of case: direct light
+ * of an area source through an obstruction). */
+static void build_obstructed(scene *sc, const params *p)
+{
+	double s = opt_or(p, O_SCALE, p->scale, 1.0);
+	build_room(sc, p);
+	obox plate = aabb(P(1.9 * s, 2.49 * s, 1.4 * s),
+	                  P(2.7 * s, 2.51 * s, 2.6 * s));
+	mesh *me = mesh_new(sc, grey(0), "plate");
+	for (int f = 0; f < NFACES; f++)
+		box_face(me, &plate, f, 1, false);
+}
+
 /* --------------------------------------------------------------- field */
 
 static const mat *palette(uint64_t *rng)
@@ -927,6 +942,7 @@ enum kind_id {
 	KD_OFFICE,
 	KD_BOX,
 	KD_ROOM,
+	KD_OBSTRUCTED,
 	KD_FIELD,
 	KD_HERD,
 	KD_HALL_EMPTY,
@@ -961,6 +977,10 @@ static const kind kinds[NKINDS] = {
 	[KD_ROOM] = {"room", build_room, NULL, 0,
 		"a black 4 x 4 x 3 m room lit by one 1 m2 ceiling panel\n"
 		"of 1000 cd/m2. 14 triangles -> 7 polygons"},
+	[KD_OBSTRUCTED] = {"obstructed", build_obstructed, NULL, 0,
+		"the room with a black plate under part of its panel:\n"
+		"direct light through an obstruction. 26 triangles ->\n"
+		"13 polygons"},
 	[KD_FIELD] = {"field", build_field, NULL, 0,
 		"random boxes, spheres and cylinders on a ground plane\n"
 		"under emissive panels and point lights (clustering)"},
@@ -1025,13 +1045,13 @@ static const opt opts[NOPTS] = {
 		"high (clear sky: about 80000)"},
 	[O_SIZE] = {"size", 0, T_VEC3, OFF(size), K(KD_BOX), 1e-6, 1e6, false,
 		"W,H,D", "box size, metres (default 1,1,1)"},
-	[O_RHO] = {"rho", 0, T_NUM, OFF(rho), K(KD_BOX) | K(KD_ROOM), 0, 0.999,
+	[O_RHO] = {"rho", 0, T_NUM, OFF(rho), K(KD_BOX) | K(KD_ROOM) | K(KD_OBSTRUCTED), 0, 0.999,
 		false, "R", "reflectance (default: box 0.5, room 0)"},
 	[O_EMIT] = {"emit", 0, T_NUM, OFF(emit), K(KD_BOX), 0, 1e9, false,
 		"L", "luminance of the faces, cd/m2 (def. 100)"},
 	[O_SUBDIV] = {"subdiv", 0, T_NUM, OFF(subdiv), K(KD_BOX), 1, 512, true,
 		"N", "quads per face edge (default 1)"},
-	[O_SCALE] = {"scale", 0, T_NUM, OFF(scale), K(KD_ROOM), 1e-6, 1e6,
+	[O_SCALE] = {"scale", 0, T_NUM, OFF(scale), K(KD_ROOM) | K(KD_OBSTRUCTED), 1e-6, 1e6,
 		false, "F", "multiply every coordinate (default 1)"},
 	[O_OBJECTS] = {"objects", 0, T_NUM, OFF(objects), K(KD_FIELD), 1, 1e6,
 		true, "N", "number of objects (default 100)"},
