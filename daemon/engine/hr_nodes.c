@@ -403,7 +403,7 @@ static double ff_iso(const rad_solver *sv, uint32_t rcv, uint32_t src,
 			 * cluster's projected area is shared by its points
 			 * that face x: each is 1/nrow of it, not all of it
 			 * (as one disk, the kernel saturates and lost a
-			 * cluster's light near it: the office's second
+			 * cluster's light near it: the Graz office's second
 			 * bounce, 31 % low in rmb). */
 			double share = ssurf ? 1.0 / nrow : 1;
 			double sa = ssurf ? as : 1.0 / nrow;

@@ -34,9 +34,11 @@
  *     fixed ray count settles nothing.  A piece whose rays disagree, or a
  *     large one whose rays agree, is unsure: it goes to a per-point heap
  *     ordered by its error.  Once the walk is done and the point's total
- *     is known (refine), every unsure piece larger than BIG_SHARE x tau x
- *     total is split once (its quarters checked with their own rays), and
- *     then the pieces with the largest errors are split into quarters,
+ *     is known (refine), every agreeing piece larger than BIG_SHARE x
+ *     tau x total is split once (its quarters checked with their own
+ *     rays; as large as tau x total, a piece wholly wrong would be the
+ *     tolerance itself), and then the pieces whose rays disagree, largest
+ *     errors first, are split into quarters,
  *     each with its own exact kernel and rays, until the errors left add
  *     up to less than tau / 2 of the total (or VIS_SPLITS splits, or
  *     VIS_DEPTH levels).  Judging against the final total, not a running
@@ -80,7 +82,7 @@
 #define VIS_DEPTH 10   /* splits of one piece, at most */
 #define VIS_HEAP 256   /* unsure pieces held per point */
 #define VIS_SPLITS 384 /* splits per point, at most */
-#define BIG_SHARE 0.25 /* agreeing pieces above this x tau x total: split */
+#define BIG_SHARE 1.0  /* agreeing pieces above this x tau x total: split */
 #define POINT_GRAIN 4  /* points per parallel chunk */
 #define NOISE_REL 1e-6 /* B - E below this share of E is float noise */
 #define NEAR_MAX 8     /* near leaves read finer per point, at most */
@@ -363,26 +365,35 @@ static double split_piece(gather *g, const piece *pc)
 static void refine(gather *g)
 {
 	double big = BIG_SHARE * g->tau * running(g), sum = 0;
-	int n = g->nheap;
+	piece whole[VIS_HEAP];
+	int n = g->nheap, nw = 0;
 	g->nheap = 0;
 	for (int i = 0; i < n; i++) {
 		piece pc = g->heap[i];
-		if (pc.kind == PIECE_WHOLE && pc.w * pc.F <= big)
+		if (pc.kind == PIECE_WHOLE) {
+			if (pc.w * pc.F > big)
+				whole[nw++] = pc;
 			continue;
+		}
 		heap_push(g, &pc);
 		sum += pc.e;
 	}
+	/* Each large agreeing piece is checked once, its quarters with rays
+	 * of their own, before the shadow edges: mixed in one heap, at a
+	 * tight tolerance these checks filled it and spent the budget, and a
+	 * partly hidden source kept its first rays (measured: --accuracy
+	 * 0.005 read +11 % / -13 % beside a plate's shadow). */
+	for (int i = 0; i < nw; i++)
+		sum += split_piece(g, &whole[i]);
 	for (int splits = 0; g->nheap > 0 && splits < VIS_SPLITS; splits++) {
-		if (g->heap[0].kind != PIECE_WHOLE &&
-		    sum <= 0.5 * g->tau * running(g))
+		if (sum <= 0.5 * g->tau * running(g))
 			break;
 		piece pc = heap_pop(g);
 		sum -= pc.e;
 		sum += split_piece(g, &pc);
 	}
 	for (int i = 0; i < g->nheap; i++)
-		if (g->heap[i].kind != PIECE_WHOLE)
-			g->errvis += g->heap[i].e;
+		g->errvis += g->heap[i].e;
 	g->nheap = 0;
 }
 
