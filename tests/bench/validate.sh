@@ -5,7 +5,8 @@
 # compared with luxrad-reference (independent Monte Carlo) or, for the
 # closed boxes, with the exact pi L / (1 - rho).  Writes
 # tests/bench/out/validate/: report.md, runs.csv, points.csv and PNG plots
-# (error against time and against peak memory, per scene).
+# (error against time and against peak memory, per scene; the summary
+# plot is copied to tests/bench/validate-summary.png for the README).
 #
 # Usage: bash tests/bench/validate.sh [--threads N] [--quick] [--timeout S]
 #                                     [--only NAME]
@@ -112,4 +113,7 @@ done
 
 /usr/bin/python3 "$ROOT/tests/bench/validate_report.py" "$OUT" \
 	"$(printf '%s\n' "${scenes[@]}")"
+# The README shows this plot (and report.md's summary table).
+[[ -z $ONLY && -f $OUT/summary.png ]] &&
+	cp "$OUT/summary.png" "$ROOT/tests/bench/validate-summary.png"
 echo "report: $OUT/report.md" >&2
