@@ -47,6 +47,9 @@
  * Emitters come out exact: when the walk reaches the root element of a
  * polygon whose material emits, the uniform part E is evaluated on the
  * whole polygon, and only the reflected part B - E goes down its quadtree.
+ * Leaves nearer to x than their size and large in its total are read at
+ * their quarters by a nested gather once the total is known (near_add,
+ * near_leaves).
  *
  * Error estimate (error_lux).  Each approximation adds what it may miss:
  * an unsure piece its binomial error c sqrt(p (1 - p) / k) (c its share,

@@ -1011,7 +1011,7 @@ static void node_power(const rad_hier *h, uint32_t id, double P[3])
 static void cluster_power(const rad_hier *h, uint32_t id, double P[3])
 {
 	const rad_cluster *c = rad_cluster_at(h, id);
-	/* Each polygon takes its cluster's irradiance (hier.h). */
+	/* A cluster's I is the mean over its area (hier.h): power A I. */
 	for (int k = 0; k < 3; k++)
 		P[k] += (double)c->area * c->I[k];
 	if (c->child != RAD_NONE) {
