@@ -666,10 +666,9 @@ double rad_cluster_proj(const rad_hier *h, const rad_cluster *c, double dx,
 	return proj_at(h, c, dx, dy, dz, RAD_PROJ_DEPTH);
 }
 
-double rad_cluster_emit(const rad_hier *h, const rad_cluster *c, int delta,
-                        double dx, double dy, double dz)
+double rad_cluster_emit(const rad_cluster *c, int delta, double p, double dx,
+                        double dy, double dz)
 {
-	double p = rad_cluster_proj(h, c, dx, dy, dz);
 	const float *v = delta ? c->ndB : c->nB;
 	double mean = rad_luma(delta ? c->dB : c->B);
 	if (!(p > 1e-6 * c->area) || mean == 0)

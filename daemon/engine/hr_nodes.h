@@ -106,6 +106,14 @@ double node_emit_factor(const rad_hier *h, uint32_t rcv, uint32_t src,
  * nothing for a surface receiver.  Not thread-safe per receiver.
  */
 void node_took(rad_hier *h, uint32_t rcv, uint32_t src, double e);
+/*
+ * Energy bound shared by hr and rmb: what receivers took from surfaces in
+ * one step (got, A I per channel) against what the polygons sent (their
+ * pulled B, or dB when delta): k[c] = sent / got where got exceeds it,
+ * else 1.  Returns the smallest k (1: the bound holds).
+ */
+double node_energy_scale(const rad_hier *h, int delta, const double got[3],
+                         double k[3]);
 /* Surface area of a node (0 for a light). */
 double node_area(const rad_hier *h, uint32_t t);
 #endif

@@ -110,8 +110,8 @@ enum {
 /* A leaf near the point whose radiosity may vary across what x sees. */
 typedef struct near {
 	rad_patch s;
-	double r, irr; /* its reflected radiosity, its mean irradiance */
-	double c, e;   /* what it added (r x visible kernel), its error */
+	double irr;  /* its mean irradiance */
+	double c, e; /* what it added (r x visible kernel), its error */
 } near;
 
 typedef struct gather {
@@ -131,7 +131,8 @@ typedef struct gather {
 	int nnear;
 } gather;
 
-static double gather_point(gather *g);
+static double gather_point(gather *g, const rad_hier *h, const rad_vis *vis,
+                           v3 x, v3 n, double tau, double floor, int nested);
 
 static double luma_d(const double c[3])
 {
@@ -443,8 +444,8 @@ static double reflected(const rad_elem *e, const float E[3])
  * gathers read leaves as they are), and x's kernel over the quarters
  * weights what each found.
  */
-static void near_add(gather *g, const rad_patch *p, double r, double irr,
-                     double c, double e)
+static void near_add(gather *g, const rad_patch *p, double irr, double c,
+                     double e)
 {
 	int k = g->nnear;
 	if (k == NEAR_MAX) {
@@ -459,7 +460,6 @@ static void near_add(gather *g, const rad_patch *p, double r, double irr,
 	}
 	near *n = &g->near[k];
 	n->s = *p;
-	n->r = r;
 	n->irr = irr;
 	n->c = c;
 	n->e = e;
@@ -482,14 +482,9 @@ static void near_leaves(gather *g)
 			if (!(fk > 0))
 				continue;
 			gather in; /* on the stack: only one level deep */
-			in.h = g->h;
-			in.vis = g->vis;
-			in.x = rad_patch_centroid(&q[k]);
-			in.n = q[k].n;
-			in.tau = tau;
-			in.floor = g->floor;
-			in.nested = 1;
-			wf += fk * gather_point(&in);
+			wf += fk * gather_point(&in, g->h, g->vis,
+			                        rad_patch_centroid(&q[k]),
+			                        q[k].n, tau, g->floor, 1);
 			f += fk;
 		}
 		if (!(f > 0))
@@ -538,7 +533,7 @@ static void gather_elem(gather *g, uint32_t id, const float E[3], double rp)
 		if (!g->nested && el > 0 && irr > 0 &&
 		    v3_len(v3_sub(rad_patch_centroid(&p), g->x)) <
 		            patch_size(&p))
-			near_add(g, &p, r, irr, r * fv, el);
+			near_add(g, &p, irr, r * fv, el);
 		return;
 	}
 	double d = v3_len(v3_sub(rad_patch_centroid(&p), g->x));
@@ -615,8 +610,8 @@ static void eval_cluster(gather *g, const rad_cluster *c, double b, v3 ctr,
 	if (cosx <= 0)
 		return;
 	v3 u = v3_scale(v3_sub(g->x, ctr), 1 / d);
-	double share = b * rad_cluster_proj(g->h, c, u.x, u.y, u.z) *
-	               rad_cluster_emit(g->h, c, 0, u.x, u.y, u.z) * cosx /
+	double p = rad_cluster_proj(g->h, c, u.x, u.y, u.z);
+	double share = b * p * rad_cluster_emit(c, 0, p, u.x, u.y, u.z) * cosx /
 	               (M_PI * d * d);
 	add_error(g, share / 2);
 	if (rad_vis_segment(g->vis, g->x, &g->n, ctr, NULL))
@@ -668,16 +663,24 @@ typedef struct query {
 	double floor, tau, solve_error;
 } query;
 
-/* Photopic illuminance at g->x: lights, then the gather (g: h, vis, x,
- * n, tau, floor and nested set; the rest is set here). */
-static double gather_point(gather *g)
+/* Photopic illuminance at x (normal n) into a gather set up here:
+ * lights, then the walk, its refinement and the near leaves. */
+static double gather_point(gather *g, const rad_hier *h, const rad_vis *vis,
+                           v3 x, v3 n, double tau, double floor, int nested)
 {
-	const rad_scene *s = g->h->scene;
+	const rad_scene *s = h->scene;
+	g->h = h;
+	g->vis = vis;
+	g->x = x;
+	g->n = n;
+	g->tau = tau;
+	g->floor = floor;
+	g->nested = nested;
 	g->total = g->err2 = g->errvis = 0;
 	g->nheap = g->nnear = 0;
 	for (uint32_t l = 0; l < s->nlights; l++) {
 		const rad_light *L = &s->lights[l];
-		g->total += rad_light_point(s->vis, L, g->x, g->n, NULL) *
+		g->total += rad_light_point(vis, L, x, n, NULL) *
 		            luma_d(L->intensity);
 	}
 	g->direct = g->total;
@@ -691,14 +694,7 @@ static double gather_point(gather *g)
 static double point_lux(const query *q, v3 x, v3 n, double *error)
 {
 	gather g; /* not zeroed as a whole: the heap is large */
-	g.h = q->h;
-	g.vis = q->scene->vis;
-	g.x = x;
-	g.n = n;
-	g.tau = q->tau;
-	g.floor = q->floor;
-	g.nested = 0;
-	gather_point(&g);
+	gather_point(&g, q->h, q->scene->vis, x, n, q->tau, q->floor, 0);
 	*error = sqrt(g.err2) + g.errvis +
 	         q->solve_error * fmax(g.total - g.direct, 0);
 	return g.total;

@@ -1045,23 +1045,13 @@ static double energy_bound(rad_solver *sv)
 {
 	rad_hier *h = &sv->h;
 	uint32_t np = sv->scene->npolys;
-	double sent[3] = {0, 0, 0}, got[3] = {0, 0, 0}, k[3];
-	for (uint32_t i = 0; i < np; i++) {
-		const rad_elem *e = rad_elem_at(h, i);
-		for (int c = 0; c < 3; c++) /* dB pulled: the root's mean */
-			sent[c] += (double)e->area * e->dB[c];
+	double got[3] = {0, 0, 0}, k[3];
+	for (uint32_t i = 0; i < np; i++)
 		node_power(h, i, got);
-	}
 	if (np > 0)
 		cluster_power(h, RAD_TAG_CLUSTER, got);
-	int scale = 0;
-	double worst = 1;
-	for (int c = 0; c < 3; c++) {
-		k[c] = got[c] > sent[c] && got[c] > 0 ? sent[c] / got[c] : 1;
-		scale |= k[c] < 1;
-		worst = fmin(worst, k[c]);
-	}
-	if (!scale)
+	double worst = node_energy_scale(h, 1, got, k);
+	if (worst >= 1)
 		return 1;
 	scale_I(h, RAD_TAG_CLUSTER, k);
 	for (uint32_t i = 0; i < np; i++)

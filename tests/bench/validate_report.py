@@ -127,6 +127,17 @@ def pct(x):
     return "%+.2f %%" % (100 * x) if not math.isnan(x) else "-"
 
 
+def gnuplot(out, script, what):
+    """Run a gnuplot script in out; False (and a message) if it failed."""
+    try:
+        subprocess.run(["gnuplot"], input=script, text=True, cwd=out,
+                       check=True, capture_output=True)
+    except (OSError, subprocess.CalledProcessError) as e:
+        print("validate_report: %s: gnuplot: %s" % (what, e), file=sys.stderr)
+        return False
+    return True
+
+
 def plot(out, name, runs, ref_rel):
     ok = [r for r in runs if "worst" in r]
     if not ok:
@@ -168,13 +179,7 @@ unset multiplot
 """ % {"png": png, "name": name, "dat": os.path.basename(dat),
        "ref": ("%g with lines dt 2 lc 8 title 'reference, 3 s.e.'," %
                (300 * ref_rel)) if ref_rel > 0 else ""}
-    try:
-        subprocess.run(["gnuplot"], input=script, text=True, cwd=out,
-                       check=True, capture_output=True)
-    except (OSError, subprocess.CalledProcessError) as e:
-        print("validate_report: %s: gnuplot: %s" % (name, e), file=sys.stderr)
-        return None
-    return png
+    return png if gnuplot(out, script, name) else None
 
 
 def summary(out, md, runs, names):
@@ -244,11 +249,7 @@ set xtics rotate by -30
 set key top left
 plot %s, 2 with lines dt 2 lc 8 title 'target, defaults (2 %%)'
 """ % ", ".join(series)
-    try:
-        subprocess.run(["gnuplot"], input=script, text=True, cwd=out,
-                       check=True, capture_output=True)
-    except (OSError, subprocess.CalledProcessError) as e:
-        print("validate_report: summary: gnuplot: %s" % e, file=sys.stderr)
+    gnuplot(out, script, "summary")
 
 
 def main():
