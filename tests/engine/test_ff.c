@@ -424,20 +424,23 @@ static void test_vis_occluder_reduces_ff(void **state)
 
 /*
  * Every sample point of the receiver under a small occluder 1 mm above it
- * (luminaires under a ceiling, on the grid the ceiling is split on): the
- * four rays all fail, yet the receiver sees the source almost whole.
- * Zero must be re-checked with other points, for patches and for lights.
+ * (luminaires under a ceiling, on a grid that lines up with the sample
+ * pattern): the rays all fail, yet the receiver sees the source almost
+ * whole.  Zero must be re-checked on points that no grid lines up with,
+ * for patches and for lights, with the 4- and with the 16-point rule
+ * (occluders over both: a 16-point recheck alone was fooled by them).
  */
 static void test_vis_aliased_zero_rechecked(void **state)
 {
 	(void)state;
 	rad_patch r0 = patch(O, V(1, 0, 0), V(0, 1, 0), 1);
-	v3 x[4];
+	v3 x[4 + 16];
 	assert_int_equal(rad_patch_samples(&r0, 4, x), 4);
+	assert_int_equal(rad_patch_samples(&r0, 16, x + 4), 16);
 	rad_scene *s = scene_start();
 	add_quad(s, 0, 0, O, V(1, 0, 0), V(0, 1, 0));
 	add_quad(s, 0, 0, V(0, 0, 1), V(0, 1, 0), V(1, 0, 0));
-	for (int k = 0; k < 4; k++) /* 4 cm squares, 1 mm up, facing down */
+	for (int k = 0; k < 20; k++) /* 4 cm squares, 1 mm up, facing down */
 		add_quad(s, 0, 0, v3_add(x[k], V(-0.02, -0.02, 0.001)),
 		         V(0, 0.04, 0), V(0.04, 0, 0));
 	rad_light_desc d = {.kind = RAD_LIGHT_POINT,
@@ -450,15 +453,17 @@ static void test_vis_aliased_zero_rechecked(void **state)
 	rad_patch r = poly_near(s, V(0.5, 0.5, 0));
 	rad_patch c = poly_near(s, V(0.5, 0.5, 1));
 	double open = rad_ff_unoccluded(&r, &c, 16);
-	uint64_t rays = 0;
-	double f = rad_ff_patch(s->vis, &r, &c, 4, 4, &rays);
-	/* 16 rays failed, then the 16-point rule's 64 were traced. */
-	assert_int_equal(rays, 16 + 64);
-	assert_true(f > 0.9 * open && f <= open);
 	const rad_light *L = &s->lights[0];
 	double e_open = rad_light_patch(NULL, L, &r, 16, NULL);
-	double e = rad_light_patch(s->vis, L, &r, 4, NULL);
-	assert_true(e > 0.9 * e_open && e <= e_open * (1 + 1e-12));
+	for (int n = 4; n <= 16; n += 12) {
+		uint64_t rays = 0;
+		double f = rad_ff_patch(s->vis, &r, &c, n, 4, &rays);
+		/* n x 4 rays failed, then 16 scattered points' 64. */
+		assert_int_equal(rays, (uint64_t)n * 4 + 64);
+		assert_true(f > 0.9 * open && f <= open);
+		double e = rad_light_patch(s->vis, L, &r, n, NULL);
+		assert_true(e > 0.9 * e_open && e <= e_open * (1 + 1e-12));
+	}
 	rad_scene_free(s);
 }
 
