@@ -365,6 +365,47 @@ double node_energy_scale(const rad_hier *h, int delta, const double got[3],
 	return worst;
 }
 
+int node_tail_rates(const double *chg, double q[3])
+{
+	int any = 0;
+	for (int c = 0; c < 3; c++) {
+		double a = chg[c], b = chg[3 + c], d = chg[6 + c];
+		q[c] = 0;
+		if (!(a > 0 && b > 0 && d > 0))
+			continue;
+		double q1 = a / b, q0 = b / d;
+		if (q1 < 0.5)
+			continue;
+		if (!(q1 < 0.9999) || fabs(q1 - q0) > 0.05 * q1 * (1 - q1))
+			return 0;
+		q[c] = q1;
+		any = 1;
+	}
+	return any;
+}
+
+static void tail_tree(rad_hier *h, uint32_t id, const double k[3])
+{
+	rad_elem *e = rad_elem_at(h, id);
+	if (e->child != RAD_NONE) {
+		for (uint32_t c = 0; c < 4; c++)
+			tail_tree(h, e->child + c, k);
+		return;
+	}
+	for (int c = 0; c < 3; c++)
+		e->B[c] += (float)(k[c] * e->dB[c]);
+}
+
+void node_tail_add(rad_hier *h, const double q[3])
+{
+	double k[3];
+	for (int c = 0; c < 3; c++)
+		k[c] = q[c] / (1 - q[c]);
+	for (uint32_t i = 0; i < h->scene->npolys; i++)
+		tail_tree(h, i, k);
+	rad_hier_pull(h);
+}
+
 /* Light -> cluster: normal irradiance at the cluster's sample points,
  * times the share of it the polygons inside take (cluster_take). */
 static double ff_light_cluster(const rad_solver *sv, const rad_light *L,

@@ -114,11 +114,15 @@ typedef struct rmb_state {
 	float *arefl;             /* per cluster id: area that reflects */
 	float *rhomax;            /* per cluster id: largest reflectance */
 	uint32_t ncl;
-	uint32_t iter;   /* iterations done */
-	int force_store; /* cancelled: keep pairs at their level */
-	double mean_dB;  /* area-mean photopic dB after the last update */
-	double mean_B;   /* ... and B */
-	rmb_set deleted; /* study: pairs deleted so far */
+	uint32_t iter;    /* iterations done */
+	int force_store;  /* cancelled: keep pairs at their level */
+	double mean_dB;   /* area-mean photopic dB after the last update */
+	double mean_B;    /* ... and B */
+	double chg[3][3]; /* sum A |dB| per channel, last three steps */
+	double q[3];      /* the tail jump's rates (tail_jump) */
+	double qmax;      /* ... the largest */
+	int jumped;       /* tail_jump done */
+	rmb_set deleted;  /* study: pairs deleted so far */
 	/* Receiver accuracy (see rcv_too_coarse), by element id:
 	 * cut   links at least this error (a fraction of the limit) go to
 	 *       the receiver's children; 0 = none.  Sticky, ELEM_SURFACE.
@@ -927,7 +931,10 @@ static rad_status next_walk(rad_solver *sv, rmb_state *st)
 /* ------------------------------------------------- push, update, pull */
 
 typedef struct push_acc {
-	double change, total; /* sum A |luma dB|, sum A luma B */
+	double change, total; /* sum A |luma of B's change|, sum A luma B */
+	double chg[3];        /* sum A |dB| per channel */
+	double shot;          /* sum A |luma dB|: what goes out next */
+	const double *q;      /* after the tail jump: its rates, else NULL */
 } push_acc;
 
 static void zero_I(rad_hier *h, uint32_t t)
@@ -1065,16 +1072,45 @@ static void update_leaf(rad_hier *h, rad_elem *e, const float *extra, void *ud)
 	(void)extra;
 	push_acc *acc = ud;
 	const rad_material *m = rad_elem_mat(h, e);
+	float inc[3];
 	for (int c = 0; c < 3; c++) {
-		e->dB[c] = m->rho[c] * e->I[c];
-		e->B[c] += e->dB[c];
+		double d = m->rho[c] * e->I[c];
+		/* After the jump (tail_jump) B takes what the increment adds
+		 * beyond the geometric tail already counted. */
+		inc[c] = acc->q ? (float)((d - acc->q[c] * e->dB[c]) /
+		                          (1 - acc->q[c]))
+		                : (float)d;
+		e->dB[c] = (float)d;
+		e->B[c] += inc[c];
+		acc->chg[c] += e->area * fabs(d);
 		/* Leaves report the total irradiance, not the increment
 		 * (a black leaf gathers nothing: it keeps the last one). */
 		if (m->rho[c] > 0)
 			e->I[c] = (e->B[c] - m->emit[c]) / m->rho[c];
 	}
-	acc->change += e->area * fabs(rad_luma(e->dB));
+	acc->change += e->area * fabs(rad_luma(inc));
+	acc->shot += e->area * fabs(rad_luma(e->dB));
 	acc->total += e->area * rad_luma(e->B);
+}
+
+/*
+ * The tail jump, as hr.c's: once the increments shrink at a steady rate q
+ * (per channel), B takes dB q / (1 - q) at once.  rmb then goes on
+ * shooting dB as before, but a leaf's B only takes what each new
+ * increment adds beyond the geometric tail already counted,
+ * (dB' - q dB) / (1 - q) (update_leaf): summed over the steps to come
+ * that is exactly what they add minus the tail, so the fixed point is
+ * unchanged.  Once per solve.  Returns 1 when it jumped.
+ */
+static int tail_jump(rad_solver *sv, rmb_state *st)
+{
+	if (st->jumped || st->iter < 4 ||
+	    !node_tail_rates(&st->chg[0][0], st->q))
+		return 0;
+	node_tail_add(&sv->h, st->q);
+	st->qmax = fmax(st->q[0], fmax(st->q[1], st->q[2]));
+	st->jumped = 1;
+	return 1;
 }
 
 /* --------------------------------------------------------- statistics */
@@ -1174,14 +1210,22 @@ static rad_status rmb_step(rad_solver *sv, rad_error *err)
 	if (st->iter > 0)
 		energy_bound(sv);
 	rad_solver_progress(sv, 0.9);
-	push_acc acc = {0, 0};
+	push_acc acc = {0, 0, {0, 0, 0}, 0, st->jumped ? st->q : NULL};
 	rad_hier_push(h, update_leaf, NULL, &acc);
 	rad_hier_pull(h);
+	memmove(st->chg[1], st->chg[0], 2 * sizeof(st->chg[0]));
+	memcpy(st->chg[0], acc.chg, sizeof(acc.chg));
 	st->iter++;
-	st->mean_dB = acc.change / sv->scene->total_area;
+	st->mean_dB = acc.shot / sv->scene->total_area;
 	st->mean_B = acc.total / sv->scene->total_area;
 	double r = acc.total > 0 ? acc.change / acc.total : 0;
+	/* After the jump, as in hr.c: the error estimate is never made from
+	 * a faster rate than the one jumped over. */
+	if (st->jumped && sv->prev_residual > 0 &&
+	    r < st->qmax * sv->prev_residual)
+		sv->prev_residual = r / st->qmax;
 	rad_solver_set_residual(sv, r);
+	tail_jump(sv, st);
 	count_links(sv);
 	return node_step_end(sv, st->rays, st->force_store, err);
 }
