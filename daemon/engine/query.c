@@ -346,15 +346,17 @@ static double piece_error(double c, double p, int tried)
 
 /*
  * Visible kernel of a piece of source of radiosity weight w (the top of a
- * source: a leaf, an element taken whole, an emitter).  Four rays now;
- * a piece they leave unsure waits in the point's heap until the total is
- * known (refine).
+ * source: a leaf, an element taken whole, an emitter).  Five rays now,
+ * fewer where memo (siblings in one quadtree, an emitter and its root
+ * element) already has its corners; a piece they leave unsure waits in
+ * the point's heap until the total is known (refine).
  */
-static double visible_ff(gather *g, const rad_patch *s, double F, double w)
+static double visible_ff(gather *g, const rad_patch *s, double F, double w,
+                         ray_memo *memo)
 {
 	double p;
 	int8_t open[5];
-	int tried = trace_piece(g, s, &p, open, NULL);
+	int tried = trace_piece(g, s, &p, open, memo);
 	piece pc = {*s, w, F, w * F * p, 0, 0, PIECE_WHOLE, {0}};
 	memcpy(pc.open, open, sizeof(open));
 	if (tried == 0 || (p > 0 && p < 1)) {
@@ -565,7 +567,8 @@ static void near_leaves(gather *g)
 /* The reflected radiosity B - E of element id and below (E: the uniform
  * emission already counted exactly on the whole polygon, or zero; rp: the
  * parent's B - E, or -1 for a root). */
-static void gather_elem(gather *g, uint32_t id, const float E[3], double rp)
+static void gather_elem(gather *g, uint32_t id, const float E[3], double rp,
+                        ray_memo *memo)
 {
 	const rad_elem *e = rad_elem_at(g->h, id);
 	double r = reflected(e, E);
@@ -580,7 +583,7 @@ static void gather_elem(gather *g, uint32_t id, const float E[3], double rp)
 	if (F <= 0)
 		return;
 	if (e->child == RAD_NONE) {
-		double fv = visible_ff(g, &p, F, r);
+		double fv = visible_ff(g, &p, F, r, memo);
 		g->total += r * fv;
 		if (rp < 0)
 			return;
@@ -594,15 +597,17 @@ static void gather_elem(gather *g, uint32_t id, const float E[3], double rp)
 	}
 	double d = v3_len(v3_sub(rad_patch_centroid(&p), g->x));
 	if (!far_enough(g, patch_size(&p), d, r * F)) {
+		ray_memo kids;
+		kids.n = 0;
 		for (uint32_t k = 0; k < 4; k++)
-			gather_elem(g, e->child + k, E, r);
+			gather_elem(g, e->child + k, E, r, &kids);
 		return;
 	}
 	/* The children's weighting rf / F is the piece's radiosity weight. */
 	double rf = children_rf(g, e, E);
 	if (!(rf > 0))
 		return;
-	double v = visible_ff(g, &p, F, rf / F) / F;
+	double v = visible_ff(g, &p, F, rf / F, memo) / F;
 	g->total += rf * v;
 	add_error(g, fabs(rf - r * F) * v);
 }
@@ -615,18 +620,20 @@ static void gather_poly(gather *g, uint32_t pid)
 	const rad_material *m = &s->mats[poly->mat];
 	double e = rad_luma(m->emit);
 	if (e <= 0) {
-		gather_elem(g, pid, none, -1);
+		gather_elem(g, pid, none, -1, NULL);
 		return;
 	}
 	rad_patch p;
 	rad_patch_from_poly(&p, poly);
 	double F = rad_ff_point_patch(g->x, g->n, &p);
+	ray_memo memo;
+	memo.n = 0;
 	if (F > 0) {
-		double c = e * visible_ff(g, &p, F, e);
+		double c = e * visible_ff(g, &p, F, e, &memo);
 		g->total += c;
 		g->direct += c;
 	}
-	gather_elem(g, pid, m->emit, -1);
+	gather_elem(g, pid, m->emit, -1, &memo);
 }
 
 static v3 box_centre(const rad_cluster *c)
