@@ -710,8 +710,8 @@ static double push_and_update(rad_hier *h, gather_job *g, double *mean_B,
  * leaf takes that tail at once and the iteration goes on from there: the
  * fixed point is the same, only reached sooner, and what the tail got
  * wrong shows as the next residuals.  Channels shrinking faster than by
- * half are left alone (their tail is under one increment).  Returns the largest
- * rate used, or 0 when none was steady.
+ * half are left alone (their tail is under one increment).  Returns the
+ * largest rate used, or 0 when none was steady.
  */
 static double tail_jump(rad_solver *sv, hr_state *st)
 {
@@ -847,8 +847,8 @@ static rad_status hr_step(rad_solver *sv, rad_error *err)
 	    r < st->q_jump * sv->prev_residual)
 		sv->prev_residual = r / st->q_jump;
 	rad_solver_set_residual(sv, r);
-	double q;
-	if ((q = tail_jump(sv, st)) > 0) {
+	double q = tail_jump(sv, st);
+	if (q > 0) {
 		st->q_jump = q;
 		st->since = 0;
 	}

@@ -41,12 +41,13 @@ void rad_options_default(rad_options *o)
  * for looser R only, the receiver variation in proportion.  At the
  * default R = 0.02 these are the long-standing defaults (eps 1e-4,
  * variation 0.5, convergence 1e-3, query tolerance 1e-2).  A variation
- * finer than 0.5 makes points a few centimetres from two walls brighter,
- * not closer (the office's floor corners: +3.4 % at 0.5, +12.7 % at
- * 0.25, against luxrad-reference; README, Limitations), and bought
- * nothing measurable elsewhere in the validation study (Cornell box,
- * obstructed source, bright hall, closed boxes and room within 0.1 %),
- * so a tighter R leaves it at 0.5 until leaves near corners are right.
+ * finer than 0.5 makes points a few centimetres from a corner (floor and
+ * two walls) brighter, not closer (the office's floor corners: +3.4 % at
+ * 0.5, +12.7 % at 0.25, against luxrad-reference; README, Limitations),
+ * and bought little elsewhere in the validation study (Cornell box,
+ * obstructed source, bright hall, closed boxes and room: within 0.4 % at
+ * --accuracy 0.01), so a tighter R leaves it at 0.5 until leaves near
+ * corners are right.
  */
 rad_status rad_options_accuracy(rad_options *o, double accuracy, rad_error *err)
 {
