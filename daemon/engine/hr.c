@@ -718,7 +718,7 @@ static double tail_jump(rad_solver *sv, hr_state *st)
 	double q[3];
 	if (st->since < 3 || !node_tail_rates(&st->chg[0][0], q))
 		return 0;
-	node_tail_add(&sv->h, q);
+	st->mean_B = node_tail_add(&sv->h, q);
 	return fmax(q[0], fmax(q[1], q[2]));
 }
 

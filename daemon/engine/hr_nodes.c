@@ -396,14 +396,19 @@ static void tail_tree(rad_hier *h, uint32_t id, const double k[3])
 		e->B[c] += (float)(k[c] * e->dB[c]);
 }
 
-void node_tail_add(rad_hier *h, const double q[3])
+double node_tail_add(rad_hier *h, const double q[3])
 {
-	double k[3];
+	double k[3], sum = 0;
 	for (int c = 0; c < 3; c++)
 		k[c] = q[c] / (1 - q[c]);
 	for (uint32_t i = 0; i < h->scene->npolys; i++)
 		tail_tree(h, i, k);
 	rad_hier_pull(h);
+	for (uint32_t i = 0; i < h->scene->npolys; i++) {
+		const rad_elem *e = rad_elem_at(h, i); /* pulled: the mean */
+		sum += e->area * rad_luma(e->B);
+	}
+	return sum / h->scene->total_area;
 }
 
 /* Light -> cluster: normal irradiance at the cluster's sample points,

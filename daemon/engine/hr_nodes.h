@@ -120,10 +120,11 @@ double node_energy_scale(const rad_hier *h, int delta, const double got[3],
  * node_tail_rates sets q[c] to the rate of each channel that shrinks
  * steadily by more than half a step (0 for the others) and returns 1,
  * or returns 0 when a slow channel is not steady yet.  node_tail_add
- * gives every leaf dB q / (1 - q) and pulls.
+ * gives every leaf dB q / (1 - q), pulls, and returns the new area-mean
+ * photopic B (the solvers' refinement budgets are relative to it).
  */
 int node_tail_rates(const double *chg, double q[3]);
-void node_tail_add(rad_hier *h, const double q[3]);
+double node_tail_add(rad_hier *h, const double q[3]);
 /* Surface area of a node (0 for a light). */
 double node_area(const rad_hier *h, uint32_t t);
 #endif

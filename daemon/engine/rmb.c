@@ -1107,7 +1107,7 @@ static int tail_jump(rad_solver *sv, rmb_state *st)
 	if (st->jumped || st->iter < 4 ||
 	    !node_tail_rates(&st->chg[0][0], st->q))
 		return 0;
-	node_tail_add(&sv->h, st->q);
+	st->mean_B = node_tail_add(&sv->h, st->q);
 	st->qmax = fmax(st->q[0], fmax(st->q[1], st->q[2]));
 	st->jumped = 1;
 	return 1;
