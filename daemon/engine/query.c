@@ -107,10 +107,13 @@ typedef struct piece {
 	int8_t open[5]; /* its rays (trace_piece): corners, centroid; -1 none */
 } piece;
 
-/* Rays already traced near a split (trace_piece reuses them). */
+/* Rays already traced to the corners of neighbouring pieces -- a split
+ * piece and its quarters, four sibling elements, an emitter and its root
+ * element -- that trace_piece reuses: a piece's 5 and four more pieces'. */
+#define MEMO_RAYS (5 + 4 * 5)
 typedef struct ray_memo {
-	v3 at[5 + 4 * 5];
-	int8_t open[5 + 4 * 5];
+	v3 at[MEMO_RAYS];
+	int8_t open[MEMO_RAYS];
 	int n;
 } ray_memo;
 
@@ -305,7 +308,7 @@ static int trace_piece(const gather *g, const rad_patch *s, double *p,
 		}
 		if (o < 0) {
 			o = rad_vis_segment(g->vis, g->x, &g->n, v[k], &s->n);
-			if (memo && memo->n < (int)(sizeof(memo->open))) {
+			if (memo && memo->n < MEMO_RAYS) {
 				memo->at[memo->n] = v[k];
 				memo->open[memo->n++] = (int8_t)o;
 			}
