@@ -361,7 +361,7 @@ static st2 scatter_point(int k, int quad)
 	return p;
 }
 
-static int scatter_samples(const rad_patch *p, int n, v3 *out)
+int rad_patch_scatter(const rad_patch *p, int n, v3 *out)
 {
 	for (int k = 0; k < n; k++) {
 		st2 c = scatter_point(k, p->quad);
@@ -395,26 +395,49 @@ static double ff_sampled(const rad_vis *vis, const rad_patch *r,
 	return sum / nx;
 }
 
+/* Keep the points of ys on s that nothing covers closer than cover. */
+static int uncovered(const rad_vis *vis, const rad_patch *s, double cover,
+                     v3 *ys, int ny, uint64_t *rays)
+{
+	int m = 0;
+	if (!(cover > 0) || !vis)
+		return ny;
+	for (int k = 0; k < ny; k++) {
+		if (rays)
+			(*rays)++;
+		if (!rad_vis_covered(vis, ys[k], s->n, cover))
+			ys[m++] = ys[k];
+	}
+	return m;
+}
+
 double rad_ff_patch_spread(const rad_vis *vis, const rad_patch *r,
-                           const rad_patch *s, int nrcv, int nvis,
+                           const rad_patch *s, int nrcv, int nvis, double cover,
                            uint64_t *rays, double *spread)
 {
 	v3 xs[RAD_FF_MAX_SAMPLES], ys[RAD_FF_MAX_SAMPLES];
 	int nx = rad_patch_samples(r, nrcv, xs);
 	int ny = rad_patch_samples(s, nvis, ys);
-	int front;
+	int n = ny, front;
+	ny = uncovered(vis, s, cover, ys, ny, rays);
+	if (spread)
+		*spread = 0;
+	if (ny == 0)
+		return 0;
 	double f = ff_sampled(vis, r, s, xs, nx, ys, ny, rays, spread, &front);
 	if (f > 0 || !vis || !front)
 		return f;
-	nx = scatter_samples(r, RECHECK_POINTS, xs);
-	ny = scatter_samples(s, ny, ys);
+	nx = rad_patch_scatter(r, RECHECK_POINTS, xs);
+	ny = uncovered(vis, s, cover, ys, rad_patch_scatter(s, n, ys), rays);
+	if (ny == 0)
+		return 0;
 	return ff_sampled(vis, r, s, xs, nx, ys, ny, rays, spread, &front);
 }
 
 double rad_ff_patch(const rad_vis *vis, const rad_patch *r, const rad_patch *s,
                     int nrcv, int nvis, uint64_t *rays)
 {
-	return rad_ff_patch_spread(vis, r, s, nrcv, nvis, rays, NULL);
+	return rad_ff_patch_spread(vis, r, s, nrcv, nvis, 0, rays, NULL);
 }
 
 /* ------------------------------------------------------------------ lights */
@@ -512,7 +535,7 @@ double rad_light_patch_spread(const rad_vis *vis, const rad_light *L,
 	/* All points in shadow: as for patches, on scattered points. */
 	if (e > 0 || !vis || !front)
 		return e;
-	n = scatter_samples(r, RECHECK_POINTS, xs);
+	n = rad_patch_scatter(r, RECHECK_POINTS, xs);
 	return light_sampled(vis, L, r, xs, n, rays, spread, &front);
 }
 

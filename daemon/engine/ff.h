@@ -46,6 +46,9 @@ int rad_patch_vertices(const rad_patch *p, v3 out[4]);
  * of points written.
  */
 int rad_patch_samples(const rad_patch *p, int n, v3 *out);
+/* n points scattered over the patch by Roberts' R2 sequence, which no
+ * regular layout of a scene lines up with (ff.c). */
+int rad_patch_scatter(const rad_patch *p, int n, v3 *out);
 
 /* Exact point-to-polygon form factor (unoccluded) from a differential
  * area at x with unit normal nx to the patch; 0 if the patch is behind x
@@ -71,9 +74,11 @@ double rad_ff_patch(const rad_vis *vis, const rad_patch *r, const rad_patch *s,
  * The same, and the spread (max - min) of the per-point values over the
  * receiver points in *spread (may be NULL): how far the receiver is from
  * seeing the source uniformly, the refinement oracles' error measure.
+ * cover > 0 leaves out the source points that something in front of them
+ * closer than cover hides (hier.h, Covered parts); 0 samples all of it.
  */
 double rad_ff_patch_spread(const rad_vis *vis, const rad_patch *r,
-                           const rad_patch *s, int nrcv, int nvis,
+                           const rad_patch *s, int nrcv, int nvis, double cover,
                            uint64_t *rays, double *spread);
 
 /*

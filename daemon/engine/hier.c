@@ -14,6 +14,8 @@
 #include <string.h>
 
 #include "err.h"
+#include "ff.h"
+#include "vis.h"
 
 static v3 poly_centroid(const rad_poly *p)
 {
@@ -230,6 +232,53 @@ static rad_status build_cluster(rad_hier *h, uint32_t c, rad_error *err)
 	return st ? st : build_cluster(h, kids + 1, err);
 }
 
+/* ------------------------------------------------------- covered parts */
+
+#define COVER_SAMPLES 16
+
+double rad_hier_cover_dist(const rad_hier *h, uint32_t poly)
+{
+	return fmin(0.05 * rad_elem_edge(rad_elem_at(h, poly)),
+	            1e-3 * h->scene->diag);
+}
+
+/* Measure e's exposed fraction on COVER_SAMPLES points (vis: the BVH). */
+static void measure_exposed(const rad_hier *h, rad_elem *e)
+{
+	const rad_vis *v = h->scene->vis;
+	double dist = rad_hier_cover_dist(h, e->poly);
+	rad_patch p;
+	v3 pts[COVER_SAMPLES];
+	rad_patch_from_floats(&p, e->p0, e->e1, e->e2, e->quad);
+	int n = rad_patch_scatter(&p, COVER_SAMPLES, pts), open = 0;
+	for (int k = 0; k < n; k++)
+		open += !rad_vis_covered(v, pts[k], p.n, dist);
+	e->exposed = (uint8_t)((open * RAD_EXPOSED_ALL + n / 2) / n);
+}
+
+int rad_elem_keep_exposed(const rad_hier *h, uint32_t id, v3 *pts, v3 *nrm,
+                          int n, uint64_t *rays)
+{
+	const rad_elem *e = rad_elem_at(h, id);
+	if (e->exposed == RAD_EXPOSED_ALL)
+		return n;
+	const rad_poly *poly = &h->scene->polys[e->poly];
+	v3 pn = v3_f(poly->n);
+	double dist = rad_hier_cover_dist(h, e->poly);
+	int m = 0;
+	for (int k = 0; k < n; k++) {
+		if (rays)
+			(*rays)++;
+		if (rad_vis_covered(h->scene->vis, pts[k], pn, dist))
+			continue;
+		pts[m] = pts[k];
+		if (nrm)
+			nrm[m] = nrm[k];
+		m++;
+	}
+	return m;
+}
+
 rad_status rad_hier_init(rad_hier *h, const rad_scene *s, rad_mem *mem,
                          double min_edge, rad_error *err)
 {
@@ -269,9 +318,14 @@ rad_status rad_hier_init(rad_hier *h, const rad_scene *s, rad_mem *mem,
 		e->poly = i;
 		e->parent = e->child = e->links = RAD_NONE;
 		e->quad = p->quad;
+		e->exposed = RAD_EXPOSED_ALL;
 		h->order[i] = i;
 	}
 	h->nleaves = n;
+	/* After the roots' edges are known (rad_hier_cover_dist). */
+	if (s->vis)
+		for (uint32_t i = 0; i < n; i++)
+			measure_exposed(h, rad_elem_at(h, i));
 	rad_cluster *root = rad_cluster_at(h, 0);
 	root->parent = RAD_NONE;
 	root->first = 0;
@@ -348,6 +402,10 @@ uint32_t rad_elem_split(rad_hier *h, uint32_t id)
 		memcpy(ch->dB, e->dB, sizeof(ch->dB));
 		ch->level = (uint8_t)(e->level + 1);
 		ch->quad = e->quad;
+		ch->exposed = e->exposed;
+		/* Not wholly exposed: the quarters measure their own. */
+		if (e->exposed != RAD_EXPOSED_ALL)
+			measure_exposed(h, ch);
 	}
 	e->child = c;
 	h->nleaves += 3;
@@ -519,8 +577,22 @@ static void push_elem(const push_ctx *p, uint32_t id, const float up[3],
 		p->leaf(p->h, e, p->extra ? x : NULL, p->ud);
 		return;
 	}
-	for (uint32_t k = 0; k < 4; k++)
-		push_elem(p, e->child + k, e->I, x);
+	double ex[4], sum = 0;
+	int even = 1;
+	for (uint32_t k = 0; k < 4; k++) {
+		const rad_elem *ch = rad_elem_at(p->h, e->child + k);
+		ex[k] = rad_elem_exposed(ch);
+		sum += ex[k];
+		even &= ch->exposed == rad_elem_at(p->h, e->child)->exposed;
+	}
+	for (uint32_t k = 0; k < 4; k++) {
+		/* Shares by exposed fraction (hier.h, Covered parts). */
+		double f = even || !(sum > 0) ? 1 : 4 * ex[k] / sum;
+		float si[3];
+		for (int c = 0; c < 3; c++)
+			si[c] = (float)(f * e->I[c]);
+		push_elem(p, e->child + k, si, x);
+	}
 }
 
 /* Share weight w(n) per unit area of a polygon of normal n (hier.h). */
@@ -588,12 +660,15 @@ static void push_cluster(const push_ctx *p, uint32_t id, const float up[3],
 	double sum = 0;
 	for (uint32_t j = cl->first; j < cl->first + cl->count; j++) {
 		const rad_poly *q = &h->scene->polys[h->order[j]];
-		sum += q->area * shape_poly(q->n, V, iso);
+		double ex = rad_elem_exposed(rad_elem_at(h, h->order[j]));
+		sum += ex * q->area * shape_poly(q->n, V, iso);
 	}
 	for (uint32_t j = cl->first; j < cl->first + cl->count; j++) {
 		const rad_poly *q = &h->scene->polys[h->order[j]];
+		double ex = rad_elem_exposed(rad_elem_at(h, h->order[j]));
 		double f =
-		        sum > 0 ? cl->area * shape_poly(q->n, V, iso) / sum : 1;
+		        sum > 0 ? ex * cl->area * shape_poly(q->n, V, iso) / sum
+		                : 1;
 		share_of(f, cl->I, x, si, sx);
 		push_elem(p, h->order[j], si, sx);
 	}

@@ -52,6 +52,19 @@ void node_B(const rad_hier *h, uint32_t t, double out[3])
 	b = node_is_cluster(t) ? rad_cluster_at(h, t)->B : rad_elem_at(h, t)->B;
 	for (int c = 0; c < 3; c++)
 		out[c] = b[c];
+	if (!node_is_cluster(t))
+		node_exposed_emission(h, t, out);
+}
+
+void node_exposed_emission(const rad_hier *h, uint32_t t, double b[3])
+{
+	const rad_elem *e = rad_elem_at(h, t);
+	if (e->exposed == RAD_EXPOSED_ALL)
+		return;
+	const float *E = h->scene->mats[h->scene->polys[e->poly].mat].emit;
+	double hidden = 1 - rad_elem_exposed(e);
+	for (int c = 0; c < 3; c++)
+		b[c] -= hidden * E[c];
 }
 
 double node_area_eff(const rad_hier *h, uint32_t t)
@@ -270,29 +283,39 @@ double node_ff_estimate(const rad_hier *h, uint32_t rcv, uint32_t src)
 	return iso_ff(as, cosr, d2);
 }
 
-/* Up to n sample points (with normals) of a node. */
-static int node_points(const rad_hier *h, uint32_t t, int n, v3 *pts, v3 *nrm)
+/*
+ * Up to n sample points (with normals) of a node.  A source's covered
+ * points are left out (hier.h, Covered parts); *rays counts the rays that
+ * took.
+ */
+static int node_points(const rad_hier *h, uint32_t t, int n, int source,
+                       v3 *pts, v3 *nrm, uint64_t *rays)
 {
 	if (node_is_cluster(t)) {
 		const rad_cluster *c = rad_cluster_at(h, t);
-		int m = (uint32_t)n < c->count ? n : (int)c->count;
+		int m = (uint32_t)n < c->count ? n : (int)c->count, kept = 0;
 		for (int k = 0; k < m; k++) {
 			uint32_t j =
 			        c->first + (uint32_t)(((uint64_t)k * c->count) /
 			                              (uint32_t)m);
 			rad_patch p;
 			rad_patch_from_poly(&p, &h->scene->polys[h->order[j]]);
-			pts[k] = rad_patch_centroid(&p);
-			nrm[k] = p.n;
+			pts[kept] = rad_patch_centroid(&p);
+			nrm[kept] = p.n;
+			if (source &&
+			    rad_elem_keep_exposed(h, h->order[j], &pts[kept],
+			                          &nrm[kept], 1, rays) == 0)
+				continue;
+			kept++;
 		}
-		return m;
+		return kept;
 	}
 	rad_patch p;
 	elem_patch(h, t, &p);
 	int m = rad_patch_samples(&p, n, pts);
 	for (int k = 0; k < m; k++)
 		nrm[k] = p.n;
-	return m;
+	return source ? rad_elem_keep_exposed(h, t, pts, nrm, m, rays) : m;
 }
 
 /* 1 if the boxes of two nodes overlap (a light: its position). */
@@ -417,7 +440,7 @@ static double ff_light_cluster(const rad_solver *sv, const rad_light *L,
                                uint32_t rcv, uint64_t *rays)
 {
 	v3 y[RAD_FF_MAX_SAMPLES], ny[RAD_FF_MAX_SAMPLES];
-	int m = node_points(&sv->h, rcv, sv->opt.rcv_samples, y, ny);
+	int m = node_points(&sv->h, rcv, sv->opt.rcv_samples, 0, y, ny, NULL);
 	double acc = 0;
 	for (int k = 0; k < m; k++) {
 		v3 toward = L->kind == RAD_LIGHT_DIRECTIONAL
@@ -447,8 +470,8 @@ static double ff_iso(const rad_solver *sv, uint32_t rcv, uint32_t src,
 	const rad_hier *h = &sv->h;
 	v3 x[RAD_FF_MAX_SAMPLES], nx[RAD_FF_MAX_SAMPLES];
 	v3 y[RAD_FF_MAX_SAMPLES], ny[RAD_FF_MAX_SAMPLES];
-	int mr = node_points(h, rcv, sv->opt.rcv_samples, x, nx);
-	int ms = node_points(h, src, sv->opt.vis_samples, y, ny);
+	int mr = node_points(h, rcv, sv->opt.rcv_samples, 0, x, nx, NULL);
+	int ms = node_points(h, src, sv->opt.vis_samples, 1, y, ny, rays);
 	int rsurf = !node_is_cluster(rcv), ssurf = !node_is_cluster(src);
 	double as = ssurf ? rad_elem_at(h, src)->area : 0;
 	double acc = 0, lo = INFINITY, hi = 0;
@@ -541,9 +564,13 @@ double node_ff(const rad_solver *sv, uint32_t rcv, uint32_t src, uint64_t *rays,
 		return ff_iso(sv, rcv, src, rays, spread);
 	elem_patch(h, rcv, &pr);
 	elem_patch(h, src, &ps);
+	const rad_elem *es = rad_elem_at(h, src);
+	double cover = es->exposed == RAD_EXPOSED_ALL
+	                       ? 0
+	                       : rad_hier_cover_dist(h, es->poly);
 	return rad_ff_patch_spread(sv->scene->vis, &pr, &ps,
 	                           sv->opt.rcv_samples, sv->opt.vis_samples,
-	                           rays, spread);
+	                           cover, rays, spread);
 }
 
 /* Axis-aligned bounds of a node, as doubles. */

@@ -28,8 +28,18 @@ static inline uint32_t node_index(uint32_t t)
 
 /* Photopic radiosity of a source node (a light: its intensity). */
 double node_luma_B(const rad_hier *h, uint32_t t);
-/* RGB radiosity of a source node, as doubles. */
+/* RGB radiosity of a source node, as doubles: the radiosity its links'
+ * form factors are made for (a partly covered element: node_exposed_emission).
+ */
 void node_B(const rad_hier *h, uint32_t t, double out[3]);
+/*
+ * A partly covered element sends only from its exposed points (hier.h,
+ * Covered parts), where its mean reflected radiosity stands for what the
+ * exposed part reflects but its emission E would count the covered part's
+ * as well: b -= (1 - exposed) E.  Nothing changes on an element wholly
+ * exposed.
+ */
+void node_exposed_emission(const rad_hier *h, uint32_t t, double b[3]);
 /* Area that turns the node's irradiance into received flux. */
 double node_area_eff(const rad_hier *h, uint32_t t);
 /* 1 if the node can be split into children. */

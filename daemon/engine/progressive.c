@@ -390,8 +390,8 @@ static void eval_item(const shot *sh, rcv_item *it)
 			                           &it->rays, &spread);
 		} else if (src->poly != e->poly) { /* coplanar: nothing */
 			f = rad_ff_patch_spread(s->vis, &r, &src->geom, nrcv,
-			                        sv->opt.vis_samples, &it->rays,
-			                        &spread);
+			                        sv->opt.vis_samples, 0,
+			                        &it->rays, &spread);
 		} else {
 			continue;
 		}

@@ -486,11 +486,14 @@ static double children_rf(const gather *g, const rad_elem *e, const float E[3])
 	return rf;
 }
 
-/* Photopic reflected radiosity B - E of an element. */
+/* Photopic reflected radiosity B - E of an element's exposed part: the
+ * point's rays to its covered part are blocked (hier.h, Covered parts). */
 static double reflected(const rad_elem *e, const float E[3])
 {
 	float R[3] = {e->B[0] - E[0], e->B[1] - E[1], e->B[2] - E[2]};
-	return rad_luma(R);
+	if (e->exposed == 0)
+		return 0;
+	return rad_luma(R) / rad_elem_exposed(e);
 }
 
 /*

@@ -291,6 +291,9 @@ static void node_dB(const rad_solver *sv, uint32_t t, double out[3])
 	                       : rad_elem_at(&sv->h, t)->dB;
 	for (int c = 0; c < 3; c++)
 		out[c] = d[c];
+	/* The first iteration sends the emission (dB = B = E). */
+	if (st->iter == 0 && !node_is_cluster(t))
+		node_exposed_emission(&sv->h, t, out);
 }
 
 static double luma3(const double c[3])

@@ -290,6 +290,13 @@ int rad_vis_segment(const rad_vis *v, v3 a, const v3 *na, v3 b, const v3 *nb)
 	return !occluded(v, a2, v3_scale(d, 1.0 / len), eps, len - eps);
 }
 
+int rad_vis_covered(const rad_vis *v, v3 x, v3 n, double dist)
+{
+	if (!(dist > 2.0 * v->eps))
+		return 0;
+	return occluded(v, v3_madd(x, n, v->eps), n, v->eps, dist);
+}
+
 int rad_vis_ray_free(const rad_vis *v, v3 a, const v3 *na, v3 d)
 {
 	v3 a2 = lift(a, na, v3_add(a, d), v->eps);

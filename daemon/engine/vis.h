@@ -43,6 +43,12 @@ double rad_vis_eps(const rad_vis *v);
  */
 int rad_vis_segment(const rad_vis *v, v3 a, const v3 *na, v3 b, const v3 *nb);
 
+/*
+ * 1 if something lies in front of the surface point x (unit normal n),
+ * between the trimming distance and dist: x is covered (hier.h).
+ */
+int rad_vis_covered(const rad_vis *v, v3 x, v3 n, double dist);
+
 /* 1 if the ray from a (normal na or NULL) in unit direction d escapes to
  * infinity (directional lights). */
 int rad_vis_ray_free(const rad_vis *v, v3 a, const v3 *na, v3 d);

@@ -14,6 +14,12 @@
  * solvers read 2-3.5 % high (the walls' leaves are brighter on average
  * than near the corner), a miss the validation study reports
  * (tests/bench/validate.sh), not one this test hides under a wider bound.
+ *
+ * The bright hall (luxrad-scenegen hall-bright) is held to the same bound
+ * on its own 0.8 m work plane: its 16 emitting panels hang 1 mm below the
+ * ceiling, and the ceiling's elements that straddle a panel's edge must
+ * neither lose the covered part's light twice nor send from behind the
+ * panel (hier.h, Covered parts; without that hr read 3.7 % low).
  */
 #include <math.h>
 #include <setjmp.h>
@@ -23,6 +29,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include <cmocka.h>
 
@@ -32,6 +39,7 @@
 #define NX 5
 #define NZ 4
 #define NPTS (NX * NZ)
+#define MAXPTS 25
 #define TARGET 0.02 /* the default accuracy (RAD_ACCURACY_DEFAULT) */
 
 static void work_plane(double pts[NPTS][6])
@@ -59,8 +67,8 @@ static rad_scene *load_office(void)
 }
 
 static void check_solver(const rad_scene *s, rad_solver_kind kind,
-                         const double pts[NPTS][6], const double ref[NPTS],
-                         const double sd[NPTS])
+                         const double pts[][6], int n, const double ref[],
+                         const double sd[])
 {
 	rad_options o;
 	rad_options_default(&o);
@@ -70,12 +78,13 @@ static void check_solver(const rad_scene *s, rad_solver_kind kind,
 	rad_error err;
 	assert_int_equal(rad_solver_new(s, &o, &sv, &err), RAD_OK);
 	assert_int_equal(rad_solver_converge(sv, 0, 200, &err), RAD_OK);
-	double lux[NPTS], el[NPTS];
+	double lux[MAXPTS], el[MAXPTS];
+	assert_true(n <= MAXPTS);
 	assert_int_equal(
-	        rad_solver_query(sv, &pts[0][0], NPTS, 0, lux, el, &err),
+	        rad_solver_query(sv, &pts[0][0], (size_t)n, 0, lux, el, &err),
 	        RAD_OK);
 	double worst = 0;
-	for (int i = 0; i < NPTS; i++) {
+	for (int i = 0; i < n; i++) {
 		double e = (lux[i] - ref[i]) / ref[i];
 		print_message("%s point %2d: %8.2f lux, reference %8.2f +- "
 		              "%.2f, %+.2f %%, error_lux %.2f\n",
@@ -105,8 +114,54 @@ static void test_office_work_plane(void **state)
 	assert_int_equal(rad_reference_illuminance(s, &pts[0][0], NPTS, &ro,
 	                                           ref, sd, NULL, &err),
 	                 RAD_OK);
-	check_solver(s, RAD_SOLVER_HR, pts, ref, sd);
-	check_solver(s, RAD_SOLVER_RMB, pts, ref, sd);
+	check_solver(s, RAD_SOLVER_HR, pts, NPTS, ref, sd);
+	check_solver(s, RAD_SOLVER_RMB, pts, NPTS, ref, sd);
+	rad_scene_free(s);
+}
+
+/* luxrad-scenegen KIND, loaded. */
+static rad_scene *generated_scene(const char *kind)
+{
+	char path[] = "/tmp/luxrad-scene-XXXXXX.glb", cmd[512];
+	int fd = mkstemps(path, 4);
+	assert_true(fd >= 0);
+	close(fd);
+	snprintf(cmd, sizeof(cmd),
+	         "'%s/luxrad-scenegen' %s -o '%s' 2>/dev/null",
+	         LUXRAD_BINARY_DIR, kind, path);
+	assert_int_equal(system(cmd), 0);
+	rad_scene *s = NULL;
+	rad_error err;
+	if (rad_gltf_load_file(path, &s, NULL, &err) != RAD_OK)
+		fail_msg("%s", err.msg);
+	unlink(path);
+	return s;
+}
+
+static void test_hall_covered_ceiling(void **state)
+{
+	(void)state;
+	rad_scene *s = generated_scene("hall-bright"); /* 24 x 6 x 16 m */
+	double pts[MAXPTS][6], ref[MAXPTS], sd[MAXPTS];
+	for (int i = 0; i < 5; i++)
+		for (int j = 0; j < 5; j++) {
+			double *p = pts[i * 5 + j];
+			p[0] = 1 + 5.5 * i;
+			p[1] = 0.8;
+			p[2] = 1 + 3.5 * j;
+			p[3] = p[5] = 0;
+			p[4] = 1;
+		}
+	rad_ref_options ro;
+	rad_ref_options_default(&ro);
+	ro.target_error = 0.004;
+	ro.threads = 2;
+	rad_error err;
+	assert_int_equal(rad_reference_illuminance(s, &pts[0][0], MAXPTS, &ro,
+	                                           ref, sd, NULL, &err),
+	                 RAD_OK);
+	check_solver(s, RAD_SOLVER_HR, pts, MAXPTS, ref, sd);
+	check_solver(s, RAD_SOLVER_RMB, pts, MAXPTS, ref, sd);
 	rad_scene_free(s);
 }
 
@@ -114,6 +169,7 @@ int main(void)
 {
 	const struct CMUnitTest tests[] = {
 	        cmocka_unit_test(test_office_work_plane),
+	        cmocka_unit_test(test_hall_covered_ceiling),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
