@@ -58,25 +58,28 @@
  * few millimetres in front of walls and ceilings.  The part of a surface
  * behind such a cover takes no light and sends none, and an element that
  * straddles its edge paid for it twice: its mean B was lowered by the dark
- * part, and its sample points behind the cover were blocked when it sent
- * (the bright hall's ceiling behind its 16 panels: the work plane read 1.4
- * % low on average, 3.7 % at worst).  So an element keeps the fraction of
- * its area that is exposed, `exposed` / RAD_EXPOSED_ALL: the share of 16
- * sample points with nothing in front of them closer than
- * rad_hier_cover_dist.  Then
+ * part, and its sample points behind the cover were blocked when it sent.
+ * So an element keeps the fraction of its area that is exposed, `exposed`
+ * / RAD_EXPOSED_ALL: the share of 16 scattered points (rad_patch_scatter;
+ * a regular grid lines up with a regular layout of panels) with nothing
+ * in front of them closer than rad_hier_cover_dist.  Then
  *   - as a source it is sampled on its exposed points only
  *     (rad_elem_keep_exposed): B, the mean over the whole element, times
  *     the form factor from its exposed part is the power that part sends
- *     with its own radiosity B / exposed;
+ *     with its own radiosity B / exposed (an emitter's E is the exposed
+ *     part's own: node_exposed_emission);
  *   - the push hands children shares of the parent's irradiance in
  *     proportion to their exposed fractions (a covered quarter takes none;
  *     the shares keep the power), and a cluster hands its polygons shares
  *     weighted by theirs;
  *   - the point query reads B / exposed, since its rays towards the
  *     covered part are blocked anyway.
- * The children of an element that is wholly exposed (or wholly covered)
- * inherit it without rays: a scene without covers pays 16 short rays per
- * polygon.
+ * Only the children of an element not wholly exposed measure their own;
+ * the others inherit it, so a scene without covers pays 16 short rays per
+ * polygon.  Measured on the bright hall (16 panels 1 mm below the
+ * ceiling), its 0.8 m work plane at defaults against luxrad-reference:
+ * hr -3.7 % at worst, 1.4 % on average before, -1.9 % and 0.9 % after.
+ * The matrix and progressive baselines sample sources whole, as before.
  *
  * Solvers and the query both see clusters through rad_cluster_proj.
  * Sillion's isotropic model (A / 4 in every direction, and 1/4 of a
