@@ -513,7 +513,14 @@ static rad_status retest_links(rad_solver *sv, hr_state *st)
  * where it exceeds what was sent, gathers again with the surfaces' share
  * scaled down to it (node_energy_scale, as rmb.c).  Nothing changes while
  * the bound holds.  (A divergence among a few surfaces of an open scene
- * is not seen by it: see the row sums below.)
+ * is not seen by it: see the row sums below.)  A black receiver counts
+ * at most a full view of what it gathers (its row sum held to 1): it
+ * sends nothing on, and an excess there is not one that compounds.  The
+ * hospital room's bedside lamps are closed black bulbs written twice over
+ * (coincident copies facing the same way), whose insides gather twice
+ * what they send; counted whole, they scaled the whole room's reflected
+ * light by 0.89 every step (hr, defaults: 12.8 % mean error against
+ * luxrad-reference, 5.4 % without).
  */
 typedef struct gather_job {
 	rad_hier *h;
@@ -557,7 +564,7 @@ static void gather_list(gather_job *g, uint32_t rcv, uint32_t head, float I[3],
                         double took[3])
 {
 	rad_hier *h = g->h;
-	double lit[3] = {0, 0, 0}, surf[3] = {0, 0, 0}, rows = 0;
+	double lit[3] = {0, 0, 0}, surf[3] = {0, 0, 0}, rows = 0, fsum = 0;
 	for (uint32_t id = head; id != RAD_NONE;) {
 		const rad_link *l = rad_link_at(h, id);
 		int light = node_is_light(l->src);
@@ -569,8 +576,10 @@ static void gather_list(gather_job *g, uint32_t rcv, uint32_t head, float I[3],
 			acc[c] += f * b[c];
 		/* Photopic k weighs a surface's share of the direction. */
 		double ks = light ? 1 : g->k[1];
-		if (!light)
+		if (!light) {
 			rows += l->ff * ks;
+			fsum += l->ff;
+		}
 		node_took(h, rcv, l->src,
 		          ks * f *
 		                  (RAD_LUMA_R * b[0] + RAD_LUMA_G * b[1] +
@@ -579,10 +588,17 @@ static void gather_list(gather_job *g, uint32_t rcv, uint32_t head, float I[3],
 	}
 	double a = node_area(h, rcv);
 	float *x = g->xe ? (float *)node_extra(h, rcv, g) : NULL;
+	const rad_material *m = node_is_cluster(rcv)
+	                                ? NULL
+	                                : rad_elem_mat(h, rad_elem_at(h, rcv));
 	if (x)
 		x[0] = (float)rows;
 	for (int c = 0; c < 3; c++) {
-		took[c] += a * g->k[c] * surf[c];
+		/* A black receiver sends nothing on, and cannot take more than
+		 * a full view of its sources (row sum 1; see gather_bounded).
+		 */
+		double black = m && !(m->rho[c] > 0) && fsum > 1 ? fsum : 1;
+		took[c] += a * g->k[c] * surf[c] / black;
 		I[c] = (float)(lit[c] + g->k[c] * surf[c]);
 		if (x)
 			x[1 + c] = (float)lit[c];
