@@ -20,6 +20,11 @@
  * ceiling, and the ceiling's elements that straddle a panel's edge must
  * neither lose the covered part's light twice nor send from behind the
  * panel (hier.h, Covered parts; without that hr read 3.7 % low).
+ *
+ * A bare bulb (a small black emitting cube written twice over, both ways,
+ * as the hospital room's bedside lamps are) beside a floor and a wall:
+ * the inside of the bulb gathers twice what it sends, which must not
+ * dim the rest of the scene through hr's energy bound (hr.c).
  */
 #include <math.h>
 #include <setjmp.h>
@@ -119,6 +124,90 @@ static void test_office_work_plane(void **state)
 	rad_scene_free(s);
 }
 
+/* Quad a b c d (counter-clockwise seen from its front) as 2 triangles. */
+static void add_quad(rad_scene *s, uint32_t mat, uint32_t node,
+                     const double q[4][3], int flip)
+{
+	static const int fwd[6] = {0, 1, 2, 0, 2, 3},
+	                 rev[6] = {0, 2, 1, 0, 3, 2};
+	double t[18];
+	rad_error err;
+	for (int k = 0; k < 6; k++)
+		memcpy(&t[3 * k], q[(flip ? rev : fwd)[k]], sizeof(double[3]));
+	assert_int_equal(rad_scene_add_triangles(s, mat, node, t, 2, &err),
+	                 RAD_OK);
+}
+
+static rad_scene *bulb_by_wall(void)
+{
+	rad_scene *s = NULL;
+	rad_error err;
+	const double grey[3] = {0.5, 0.5, 0.5}, black[3] = {0, 0, 0};
+	const double dark[3] = {0, 0, 0}, bright[3] = {2e4, 2e4, 2e4};
+	uint32_t room, bulb, node;
+	assert_int_equal(rad_scene_new(&s, &err), RAD_OK);
+	assert_int_equal(rad_scene_add_material(s, grey, dark, &room, &err),
+	                 RAD_OK);
+	assert_int_equal(rad_scene_add_material(s, black, bright, &bulb, &err),
+	                 RAD_OK);
+	assert_int_equal(rad_scene_add_node(s, "room", &node, &err), RAD_OK);
+	const double floor[4][3] = {{0, 0, 0}, {0, 0, 4}, {4, 0, 4}, {4, 0, 0}};
+	const double wall[4][3] = {{0, 0, 0}, {4, 0, 0}, {4, 3, 0}, {0, 3, 0}};
+	add_quad(s, room, node, floor, 0);
+	add_quad(s, room, node, wall, 0);
+	/* A 5 cm cube 0.2 m off the wall, its faces outwards (as in
+	 * test_solver's box, seen from outside). */
+	const double c[3] = {2, 1.5, 0.2}, a = 0.025;
+	static const double u[6][4][3] = {
+	        {{0, 0, 0}, {1, 0, 0}, {1, 0, 1}, {0, 0, 1}},
+	        {{0, 1, 0}, {0, 1, 1}, {1, 1, 1}, {1, 1, 0}},
+	        {{0, 0, 0}, {0, 0, 1}, {0, 1, 1}, {0, 1, 0}},
+	        {{1, 0, 0}, {1, 1, 0}, {1, 1, 1}, {1, 0, 1}},
+	        {{0, 0, 0}, {0, 1, 0}, {1, 1, 0}, {1, 0, 0}},
+	        {{0, 0, 1}, {1, 0, 1}, {1, 1, 1}, {0, 1, 1}},
+	};
+	for (int f = 0; f < 6; f++) {
+		double q[4][3];
+		for (int v = 0; v < 4; v++)
+			for (int k = 0; k < 3; k++)
+				q[v][k] = c[k] + a * (2 * u[f][v][k] - 1);
+		for (int copy = 0; copy < 4; copy++)
+			add_quad(s, bulb, node, (const double(*)[3])q,
+			         copy & 1);
+	}
+	assert_int_equal(rad_scene_commit(s, &err), RAD_OK);
+	return s;
+}
+
+static void test_bulb_written_twice(void **state)
+{
+	(void)state;
+	rad_scene *s = bulb_by_wall();
+	double pts[MAXPTS][6], ref[MAXPTS], sd[MAXPTS];
+	int n = 0;
+	for (int i = 0; i < 4; i++) {
+		for (int j = 0; j < 2; j++) {
+			double *p = pts[n++];
+			p[0] = 0.5 + i;
+			p[1] = j ? 0.8 : 0.01;
+			p[2] = 0.5 + 0.8 * j + 0.5 * i;
+			p[3] = p[5] = 0;
+			p[4] = 1;
+		}
+	}
+	rad_ref_options ro;
+	rad_ref_options_default(&ro);
+	ro.target_error = 0.004;
+	ro.threads = 2;
+	rad_error err;
+	assert_int_equal(rad_reference_illuminance(s, &pts[0][0], (size_t)n,
+	                                           &ro, ref, sd, NULL, &err),
+	                 RAD_OK);
+	check_solver(s, RAD_SOLVER_HR, pts, n, ref, sd);
+	check_solver(s, RAD_SOLVER_RMB, pts, n, ref, sd);
+	rad_scene_free(s);
+}
+
 /* luxrad-scenegen KIND, loaded. */
 static rad_scene *generated_scene(const char *kind)
 {
@@ -170,6 +259,7 @@ int main(void)
 	const struct CMUnitTest tests[] = {
 	        cmocka_unit_test(test_office_work_plane),
 	        cmocka_unit_test(test_hall_covered_ceiling),
+	        cmocka_unit_test(test_bulb_written_twice),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
