@@ -32,8 +32,9 @@
 
 #define SOL_MAGIC 0x534c5852u /* "RXLS" little-endian: "luxrad solution" */
 #define SOL_VERSION                                                            \
-	3u /* 2: clusters carry their orientation moments; 3:                  \
-	    * and where their irradiance came from */
+	4u /* 2: clusters carry their orientation moments; 3:                  \
+	    * and where their irradiance came from; 4: elements their          \
+	    * exposed fraction (hier.h, Covered parts) */
 
 struct rad_solution {
 	const rad_scene *scene;
