@@ -204,6 +204,39 @@ static int clip_front(v3 x, v3 nx, const rad_patch *s, v3 out[5])
 	return m;
 }
 
+/*
+ * atan2(y, x) for y >= 0, the angle an edge subtends (0 .. pi).  The point
+ * query spends most of its arithmetic here: libm's atan2 took 16 % of the
+ * full hall's query time.  Reduced to |u| <= tan(pi/8), atan(u) = u q(u^2)
+ * with q the degree-7 interpolant of atan(sqrt(s))/sqrt(s) at the
+ * Chebyshev nodes of [0, tan(pi/8)^2]: at most 2.8e-13 rad off.
+ */
+static double edge_angle(double y, double x)
+{
+	static const double q[8] = {
+	        0.99999999999924449,  -0.33333333276916066,
+	        0.19999993053110954,  -0.14285386540040962,
+	        0.11103456693779999,  -0.089925511211191647,
+	        0.069741902318458546, -0.037654982631026769,
+	};
+	const double tan_pi_8 = 0.41421356237309503;
+	double ax = fabs(x), t, base = 0, a, p = 0;
+	int steep = y > ax;
+	if (!(y > 0))
+		return x < 0 ? M_PI : 0;
+	t = steep ? ax / y : y / ax;
+	if (t > tan_pi_8) {
+		t = (t - 1) / (t + 1);
+		base = M_PI / 4;
+	}
+	for (int k = 7; k >= 0; k--)
+		p = p * (t * t) + q[k];
+	a = base + t * p;
+	if (steep)
+		a = M_PI / 2 - a;
+	return x < 0 ? M_PI - a : a;
+}
+
 /* Lambert's contour sum over vertices r (relative to x); see DESIGN. */
 static double contour(const v3 *r, int n, v3 nx)
 {
@@ -215,7 +248,7 @@ static double contour(const v3 *r, int n, v3 nx)
 		/* Collinear with x: the edge subtends no solid angle. */
 		if (!(len > 0))
 			continue;
-		sum += atan2(len, v3_dot(a, b)) * v3_dot(g, nx) / len;
+		sum += edge_angle(len, v3_dot(a, b)) * v3_dot(g, nx) / len;
 	}
 	return sum / (2.0 * M_PI);
 }
