@@ -119,6 +119,8 @@ typedef struct rad_scene_counts {
 	uint32_t triangles_in;         /* triangles offered to the builder */
 	uint32_t triangles_nonfinite;  /* skipped: NaN or Inf coordinate */
 	uint32_t triangles_degenerate; /* skipped: zero or sliver area */
+	uint32_t triangles_duplicate;  /* dropped: a copy of an earlier one,
+	                                  same vertices, same facing */
 	uint32_t polygons;             /* polygons kept (after quad merging) */
 	uint32_t quads;                /* of which parallelograms */
 	uint32_t materials;            /* distinct materials stored */

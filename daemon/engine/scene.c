@@ -528,7 +528,37 @@ static void edges_by_length(const float *stage, uint32_t t, int order[3])
 }
 
 /* What merging made of each triangle. */
-enum { PAIR_NONE, PAIR_QUAD, PAIR_ABSORBED };
+enum { PAIR_NONE, PAIR_QUAD, PAIR_ABSORBED, PAIR_DUPLICATE };
+
+/*
+ * 1 if triangle t repeats an earlier one: the same three vertices in the
+ * same turn (so facing the same way).  Such copies are one surface to
+ * every renderer but were two to the solvers, each receiving and sending
+ * in full: twice the light from the hospital room's bedside bulbs, which
+ * half its triangles repeat (the reversed twin of a two-sided face is not
+ * a copy and stays).  The edge map holds the first owner of each directed
+ * edge, so a copy finds its original through one of its edges unless all
+ * three are shared with yet other triangles.
+ */
+static int duplicate_of_earlier(const rad_scene *s, const edge_map *m,
+                                uint32_t t)
+{
+	for (int k = 0; k < 3; k++) {
+		uint32_t e = *edge_probe(m, stage_vertex(s->stage, t, k),
+		                         stage_vertex(s->stage, t, k + 1));
+		uint32_t u = e / 3;
+		if (e == RAD_NONE || u >= t)
+			continue;
+		int du = (int)(e % 3) - k, same = 1;
+		for (int i = 0; i < 3; i++)
+			same &= same_point(
+			        stage_vertex(s->stage, t, i),
+			        stage_vertex(s->stage, u, i + du + 3));
+		if (same)
+			return 1;
+	}
+	return 0;
+}
 
 /* Pair t with its first mergeable free neighbour. */
 static void pair_triangle(rad_scene *s, const edge_map *m, uint8_t *pair,
@@ -564,11 +594,16 @@ static rad_status merge_quads(rad_scene *s, rad_error *err)
 		                s->npolys);
 	}
 	for (uint32_t t = 0; t < s->npolys; t++)
+		if (duplicate_of_earlier(s, &m, t)) {
+			pair[t] = PAIR_DUPLICATE;
+			s->counts.triangles_duplicate++;
+		}
+	for (uint32_t t = 0; t < s->npolys; t++)
 		if (pair[t] == PAIR_NONE)
 			pair_triangle(s, &m, pair, t);
 	uint32_t n = 0;
 	for (uint32_t t = 0; t < s->npolys; t++)
-		if (pair[t] != PAIR_ABSORBED)
+		if (pair[t] == PAIR_NONE || pair[t] == PAIR_QUAD)
 			s->polys[n++] = s->polys[t];
 	s->npolys = n;
 	rad_mem_free(&s->mem, RAD_MEM_SCRATCH, m.slot);

@@ -92,6 +92,7 @@ static void test_upload_reports_what_luxrad_solve_reports(void **state)
 	static const char *const counts[] = {"triangles_in",
 	                                     "triangles_nonfinite",
 	                                     "triangles_degenerate",
+	                                     "triangles_duplicate",
 	                                     "polygons",
 	                                     "quads",
 	                                     "materials",

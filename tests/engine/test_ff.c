@@ -780,6 +780,34 @@ static void test_scene_skips_and_counts_bad_triangles(void **state)
 	rad_scene_free(s);
 }
 
+/*
+ * A repeated triangle (same vertices, same turn, whichever vertex it
+ * starts from) is one surface: dropped at commit and counted.  The
+ * reversed twin of a two-sided face is not a copy and stays, and a copy
+ * of one half of a square does not keep the square from merging.
+ */
+static void test_scene_drops_repeated_triangles(void **state)
+{
+	(void)state;
+	rad_scene *s = scene_start();
+	add_quad(s, 0, 0, V(0, 0, 0), V(1, 0, 0), V(0, 1, 0)); /* faces +z */
+	const double copies[3][9] = {
+	        {0, 0, 0, 1, 0, 0, 1, 1, 0}, /* the first half again */
+	        {1, 0, 0, 1, 1, 0, 0, 0, 0}, /* the same, rotated */
+	        {0, 0, 0, 1, 1, 0, 1, 0, 0}, /* reversed: faces -z */
+	};
+	assert_int_equal(rad_scene_add_triangles(s, 0, 0, copies[0], 3, NULL),
+	                 RAD_OK);
+	commit_ok(s);
+	rad_scene_counts c;
+	rad_scene_counts_get(s, &c);
+	assert_int_equal(c.triangles_in, 5);
+	assert_int_equal(c.triangles_duplicate, 2);
+	assert_int_equal(c.polygons, 2); /* the square and the reversed half */
+	assert_int_equal(c.quads, 1);
+	rad_scene_free(s);
+}
+
 static void test_scene_merges_square_into_one_parallelogram(void **state)
 {
 	(void)state;
@@ -1015,6 +1043,7 @@ int main(void)
 	        cmocka_unit_test(test_scene_skips_and_counts_bad_triangles),
 	        cmocka_unit_test(
 	                test_scene_merges_square_into_one_parallelogram),
+	        cmocka_unit_test(test_scene_drops_repeated_triangles),
 	        cmocka_unit_test(
 	                test_scene_merges_triangulated_grid_into_cells),
 	        cmocka_unit_test(test_scene_keeps_non_parallelogram_pairs),
