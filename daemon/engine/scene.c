@@ -534,11 +534,11 @@ enum { PAIR_NONE, PAIR_QUAD, PAIR_ABSORBED, PAIR_DUPLICATE };
  * 1 if triangle t repeats an earlier one: the same three vertices in the
  * same turn (so facing the same way).  Such copies are one surface to
  * every renderer but were two to the solvers, each receiving and sending
- * in full: twice the light from the hospital room's bedside bulbs, which
- * half its triangles repeat (the reversed twin of a two-sided face is not
- * a copy and stays).  The edge map holds the first owner of each directed
- * edge, so a copy finds its original through one of its edges unless all
- * three are shared with yet other triangles.
+ * in full.  Half the hospital room's triangles are copies, its bedside
+ * bulbs among them, which sent their light twice.  The reversed twin of a
+ * two-sided face is not a copy and stays.  The edge map holds the first
+ * owner of each directed edge, so a copy finds its original through one of
+ * its edges, unless other triangles own all three first (then it stays).
  */
 static int duplicate_of_earlier(const rad_scene *s, const edge_map *m,
                                 uint32_t t)
