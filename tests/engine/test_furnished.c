@@ -22,9 +22,14 @@
  * panel (hier.h, Covered parts; without that hr read 3.7 % low).
  *
  * A bare bulb (a small black emitting cube written twice over, both ways,
- * as the hospital room's bedside lamps are) beside a floor and a wall:
- * the inside of the bulb gathers twice what it sends, which must not
- * dim the rest of the scene through hr's energy bound (hr.c).
+ * as the hospital room's bedside lamps are) beside a floor and a wall.
+ * Written so, the inside of the bulb gathered twice what it sent and hr's
+ * energy bound dimmed the whole scene (hr read 4.6 % low before 5b51e7a);
+ * since the scene drops repeated triangles at commit (0df24ef) the copies
+ * no longer reach the solvers, and the test holds the bare bulb, each
+ * face once each way, to the reference.
+ *
+ * A ceiling luminaire half covered by a black board 1 mm below it.
  */
 #include <math.h>
 #include <setjmp.h>
@@ -105,23 +110,35 @@ static void check_solver(const rad_scene *s, rad_solver_kind kind,
 	rad_solver_free(sv);
 }
 
-static void test_office_work_plane(void **state)
+/*
+ * Hold hr and rmb, at the defaults, to luxrad-reference on the n points
+ * (0.4 % standard error): each within the target plus 3 standard errors.
+ * Frees the scene.
+ */
+static void hold_to_reference(rad_scene *s, const double pts[][6], int n)
 {
-	(void)state;
-	rad_scene *s = load_office();
-	double pts[NPTS][6], ref[NPTS], sd[NPTS];
-	work_plane(pts);
+	double ref[MAXPTS], sd[MAXPTS];
 	rad_ref_options ro;
 	rad_ref_options_default(&ro);
 	ro.target_error = 0.004;
 	ro.threads = 2;
 	rad_error err;
-	assert_int_equal(rad_reference_illuminance(s, &pts[0][0], NPTS, &ro,
-	                                           ref, sd, NULL, &err),
+	assert_true(n <= MAXPTS);
+	assert_int_equal(rad_reference_illuminance(s, &pts[0][0], (size_t)n,
+	                                           &ro, ref, sd, NULL, &err),
 	                 RAD_OK);
-	check_solver(s, RAD_SOLVER_HR, pts, NPTS, ref, sd);
-	check_solver(s, RAD_SOLVER_RMB, pts, NPTS, ref, sd);
+	check_solver(s, RAD_SOLVER_HR, pts, n, ref, sd);
+	check_solver(s, RAD_SOLVER_RMB, pts, n, ref, sd);
 	rad_scene_free(s);
+}
+
+static void test_office_work_plane(void **state)
+{
+	(void)state;
+	rad_scene *s = load_office();
+	double pts[NPTS][6];
+	work_plane(pts);
+	hold_to_reference(s, pts, NPTS);
 }
 
 /* Quad a b c d (counter-clockwise seen from its front) as 2 triangles. */
@@ -183,7 +200,7 @@ static void test_bulb_written_twice(void **state)
 {
 	(void)state;
 	rad_scene *s = bulb_by_wall();
-	double pts[MAXPTS][6], ref[MAXPTS], sd[MAXPTS];
+	double pts[MAXPTS][6];
 	int n = 0;
 	for (int i = 0; i < 4; i++) {
 		for (int j = 0; j < 2; j++) {
@@ -195,17 +212,67 @@ static void test_bulb_written_twice(void **state)
 			p[4] = 1;
 		}
 	}
-	rad_ref_options ro;
-	rad_ref_options_default(&ro);
-	ro.target_error = 0.004;
-	ro.threads = 2;
+	hold_to_reference(s, pts, n);
+}
+
+/*
+ * A ceiling luminaire half covered by a black board 1 mm below it, over
+ * a floor and a wall, the points near the wall and out in the room: the
+ * covered half sends nothing, directly or by reflection (hier.h, Covered
+ * parts).  Measured: these lux do not change when the emitter's exposed
+ * share of E (node_exposed_emission) is left out, so this holds the case
+ * to the reference but does not guard that line.
+ */
+static rad_scene *luminaire_half_covered(void)
+{
+	rad_scene *s = NULL;
 	rad_error err;
-	assert_int_equal(rad_reference_illuminance(s, &pts[0][0], (size_t)n,
-	                                           &ro, ref, sd, NULL, &err),
+	const double grey[3] = {0.5, 0.5, 0.5}, black[3] = {0, 0, 0};
+	const double lum[3] = {2000, 2000, 2000};
+	uint32_t room, lamp, board, node;
+	assert_int_equal(rad_scene_new(&s, &err), RAD_OK);
+	assert_int_equal(rad_scene_add_material(s, grey, black, &room, &err),
 	                 RAD_OK);
-	check_solver(s, RAD_SOLVER_HR, pts, n, ref, sd);
-	check_solver(s, RAD_SOLVER_RMB, pts, n, ref, sd);
-	rad_scene_free(s);
+	assert_int_equal(rad_scene_add_material(s, black, lum, &lamp, &err),
+	                 RAD_OK);
+	assert_int_equal(rad_scene_add_material(s, black, black, &board, &err),
+	                 RAD_OK);
+	assert_int_equal(rad_scene_add_node(s, "room", &node, &err), RAD_OK);
+	const double floor[4][3] = {{0, 0, 0}, {0, 0, 4}, {4, 0, 4}, {4, 0, 0}};
+	const double wall[4][3] = {{0, 0, 0}, {4, 0, 0}, {4, 3, 0}, {0, 3, 0}};
+	/* Facing down: the panel at 2.5 m, the board over its x < 2 half. */
+	const double panel[4][3] = {{1.5, 2.5, 1.5},
+	                            {2.5, 2.5, 1.5},
+	                            {2.5, 2.5, 2.5},
+	                            {1.5, 2.5, 2.5}};
+	const double cover[4][3] = {{1.4, 2.499, 1.4},
+	                            {2, 2.499, 1.4},
+	                            {2, 2.499, 2.6},
+	                            {1.4, 2.499, 2.6}};
+	add_quad(s, room, node, floor, 0);
+	add_quad(s, room, node, wall, 0);
+	add_quad(s, lamp, node, panel, 0);
+	add_quad(s, board, node, cover, 0);
+	assert_int_equal(rad_scene_commit(s, &err), RAD_OK);
+	return s;
+}
+
+static void test_luminaire_half_covered(void **state)
+{
+	(void)state;
+	rad_scene *s = luminaire_half_covered();
+	double pts[MAXPTS][6];
+	int n = 0;
+	for (int i = 0; i < 4; i++)
+		for (int j = 0; j < 2; j++) {
+			double *p = pts[n++];
+			p[0] = 0.5 + i;
+			p[1] = j ? 0.8 : 0.01;
+			p[2] = j ? 0.3 : 0.5 + i; /* near the wall, and out */
+			p[3] = p[5] = 0;
+			p[4] = 1;
+		}
+	hold_to_reference(s, pts, n);
 }
 
 /* luxrad-scenegen KIND, loaded. */
@@ -231,7 +298,7 @@ static void test_hall_covered_ceiling(void **state)
 {
 	(void)state;
 	rad_scene *s = generated_scene("hall-bright"); /* 24 x 6 x 16 m */
-	double pts[MAXPTS][6], ref[MAXPTS], sd[MAXPTS];
+	double pts[MAXPTS][6];
 	for (int i = 0; i < 5; i++)
 		for (int j = 0; j < 5; j++) {
 			double *p = pts[i * 5 + j];
@@ -241,17 +308,7 @@ static void test_hall_covered_ceiling(void **state)
 			p[3] = p[5] = 0;
 			p[4] = 1;
 		}
-	rad_ref_options ro;
-	rad_ref_options_default(&ro);
-	ro.target_error = 0.004;
-	ro.threads = 2;
-	rad_error err;
-	assert_int_equal(rad_reference_illuminance(s, &pts[0][0], MAXPTS, &ro,
-	                                           ref, sd, NULL, &err),
-	                 RAD_OK);
-	check_solver(s, RAD_SOLVER_HR, pts, MAXPTS, ref, sd);
-	check_solver(s, RAD_SOLVER_RMB, pts, MAXPTS, ref, sd);
-	rad_scene_free(s);
+	hold_to_reference(s, pts, MAXPTS);
 }
 
 int main(void)
@@ -260,6 +317,7 @@ int main(void)
 	        cmocka_unit_test(test_office_work_plane),
 	        cmocka_unit_test(test_hall_covered_ceiling),
 	        cmocka_unit_test(test_bulb_written_twice),
+	        cmocka_unit_test(test_luminaire_half_covered),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
