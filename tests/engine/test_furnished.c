@@ -11,7 +11,7 @@
  * of the solution's own error and covers 7 of these 20 points.)
  *
  * Points 2 cm from two walls on the floor are left out: there both
- * solvers read 2-3.5 % high (the walls' leaves are brighter on average
+ * solvers read 2-4 % high (the walls' leaves are brighter on average
  * than near the corner), a miss the validation study reports
  * (tests/bench/validate.sh), not one this test hides under a wider bound.
  *
@@ -24,12 +24,14 @@
  * A bare bulb (a small black emitting cube written twice over, both ways,
  * as the hospital room's bedside lamps are) beside a floor and a wall.
  * Written so, the inside of the bulb gathered twice what it sent and hr's
- * energy bound dimmed the whole scene (hr read 4.6 % low before 5b51e7a);
- * since the scene drops repeated triangles at commit (0df24ef) the copies
- * no longer reach the solvers, and the test holds the bare bulb, each
- * face once each way, to the reference.
+ * energy bound dimmed the whole scene (hr read 4.6 % low until a black
+ * receiver was held to a full view, hr.c); now that a scene drops
+ * repeated triangles at commit (scene.c) the copies no longer reach the
+ * solvers, and the test holds the bare bulb, each face once each way, to
+ * the reference.
  *
- * A ceiling luminaire half covered by a black board 1 mm below it.
+ * A ceiling luminaire half covered by a black board 1 mm below it
+ * (luminaire_half_covered).
  */
 #include <math.h>
 #include <setjmp.h>
