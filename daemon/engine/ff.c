@@ -432,16 +432,9 @@ static double ff_sampled(const rad_vis *vis, const rad_patch *r,
 static int uncovered(const rad_vis *vis, const rad_patch *s, double cover,
                      v3 *ys, int ny, uint64_t *rays)
 {
-	int m = 0;
 	if (!(cover > 0) || !vis)
 		return ny;
-	for (int k = 0; k < ny; k++) {
-		if (rays)
-			(*rays)++;
-		if (!rad_vis_covered(vis, ys[k], s->n, cover))
-			ys[m++] = ys[k];
-	}
-	return m;
+	return rad_vis_keep_uncovered(vis, s->n, cover, ys, NULL, ny, rays);
 }
 
 double rad_ff_patch_spread(const rad_vis *vis, const rad_patch *r,

@@ -262,21 +262,9 @@ int rad_elem_keep_exposed(const rad_hier *h, uint32_t id, v3 *pts, v3 *nrm,
 	const rad_elem *e = rad_elem_at(h, id);
 	if (e->exposed == RAD_EXPOSED_ALL)
 		return n;
-	const rad_poly *poly = &h->scene->polys[e->poly];
-	v3 pn = v3_f(poly->n);
-	double dist = rad_hier_cover_dist(h, e->poly);
-	int m = 0;
-	for (int k = 0; k < n; k++) {
-		if (rays)
-			(*rays)++;
-		if (rad_vis_covered(h->scene->vis, pts[k], pn, dist))
-			continue;
-		pts[m] = pts[k];
-		if (nrm)
-			nrm[m] = nrm[k];
-		m++;
-	}
-	return m;
+	return rad_vis_keep_uncovered(
+	        h->scene->vis, v3_f(h->scene->polys[e->poly].n),
+	        rad_hier_cover_dist(h, e->poly), pts, nrm, n, rays);
 }
 
 rad_status rad_hier_init(rad_hier *h, const rad_scene *s, rad_mem *mem,

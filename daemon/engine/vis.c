@@ -297,6 +297,23 @@ int rad_vis_covered(const rad_vis *v, v3 x, v3 n, double dist)
 	return occluded(v, v3_madd(x, n, v->eps), n, v->eps, dist);
 }
 
+int rad_vis_keep_uncovered(const rad_vis *v, v3 n, double dist, v3 *pts,
+                           v3 *nrm, int count, uint64_t *rays)
+{
+	int m = 0;
+	for (int k = 0; k < count; k++) {
+		if (rays)
+			(*rays)++;
+		if (rad_vis_covered(v, pts[k], n, dist))
+			continue;
+		pts[m] = pts[k];
+		if (nrm)
+			nrm[m] = nrm[k];
+		m++;
+	}
+	return m;
+}
+
 int rad_vis_ray_free(const rad_vis *v, v3 a, const v3 *na, v3 d)
 {
 	v3 a2 = lift(a, na, v3_add(a, d), v->eps);

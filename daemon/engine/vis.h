@@ -49,6 +49,15 @@ int rad_vis_segment(const rad_vis *v, v3 a, const v3 *na, v3 b, const v3 *nb);
  */
 int rad_vis_covered(const rad_vis *v, v3 x, v3 n, double dist);
 
+/*
+ * Keep, of the count points pts on a surface of unit normal n, those not
+ * covered closer than dist (rad_vis_covered), in order; nrm (or NULL) is
+ * kept in step, and *rays (or NULL) counts the rays.  Returns how many
+ * are left.
+ */
+int rad_vis_keep_uncovered(const rad_vis *v, v3 n, double dist, v3 *pts,
+                           v3 *nrm, int count, uint64_t *rays);
+
 /* 1 if the ray from a (normal na or NULL) in unit direction d escapes to
  * infinity (directional lights). */
 int rad_vis_ray_free(const rad_vis *v, v3 a, const v3 *na, v3 d);
