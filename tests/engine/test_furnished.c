@@ -41,10 +41,10 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <unistd.h>
 
 #include <cmocka.h>
 
+#include "generated.h"
 #include "gltf.h"
 #include "rad.h"
 
@@ -157,23 +157,40 @@ static void add_quad(rad_scene *s, uint32_t mat, uint32_t node,
 	                 RAD_OK);
 }
 
-static rad_scene *bulb_by_wall(void)
+/* A material, its id. */
+static uint32_t material(rad_scene *s, const double rho[3], const double lum[3])
+{
+	uint32_t id;
+	rad_error err;
+	assert_int_equal(rad_scene_add_material(s, rho, lum, &id, &err),
+	                 RAD_OK);
+	return id;
+}
+
+/* A new scene: a 4 x 4 m grey (0.5) floor and a 4 x 3 m wall at z = 0,
+ * on node *node, to which a case adds its light. */
+static rad_scene *floor_and_wall(uint32_t *node)
 {
 	rad_scene *s = NULL;
 	rad_error err;
-	const double grey[3] = {0.5, 0.5, 0.5}, black[3] = {0, 0, 0};
-	const double dark[3] = {0, 0, 0}, bright[3] = {2e4, 2e4, 2e4};
-	uint32_t room, bulb, node;
-	assert_int_equal(rad_scene_new(&s, &err), RAD_OK);
-	assert_int_equal(rad_scene_add_material(s, grey, dark, &room, &err),
-	                 RAD_OK);
-	assert_int_equal(rad_scene_add_material(s, black, bright, &bulb, &err),
-	                 RAD_OK);
-	assert_int_equal(rad_scene_add_node(s, "room", &node, &err), RAD_OK);
+	const double grey[3] = {0.5, 0.5, 0.5}, dark[3] = {0, 0, 0};
 	const double floor[4][3] = {{0, 0, 0}, {0, 0, 4}, {4, 0, 4}, {4, 0, 0}};
 	const double wall[4][3] = {{0, 0, 0}, {4, 0, 0}, {4, 3, 0}, {0, 3, 0}};
-	add_quad(s, room, node, floor, 0);
-	add_quad(s, room, node, wall, 0);
+	assert_int_equal(rad_scene_new(&s, &err), RAD_OK);
+	uint32_t room = material(s, grey, dark);
+	assert_int_equal(rad_scene_add_node(s, "room", node, &err), RAD_OK);
+	add_quad(s, room, *node, floor, 0);
+	add_quad(s, room, *node, wall, 0);
+	return s;
+}
+
+static rad_scene *bulb_by_wall(void)
+{
+	rad_error err;
+	const double black[3] = {0, 0, 0}, bright[3] = {2e4, 2e4, 2e4};
+	uint32_t node;
+	rad_scene *s = floor_and_wall(&node);
+	uint32_t bulb = material(s, black, bright);
 	/* A 5 cm cube 0.2 m off the wall, its faces outwards (as in
 	 * test_solver's box, seen from outside). */
 	const double c[3] = {2, 1.5, 0.2}, a = 0.025;
@@ -227,21 +244,12 @@ static void test_bulb_written_twice(void **state)
  */
 static rad_scene *luminaire_half_covered(void)
 {
-	rad_scene *s = NULL;
 	rad_error err;
-	const double grey[3] = {0.5, 0.5, 0.5}, black[3] = {0, 0, 0};
-	const double lum[3] = {2000, 2000, 2000};
-	uint32_t room, lamp, board, node;
-	assert_int_equal(rad_scene_new(&s, &err), RAD_OK);
-	assert_int_equal(rad_scene_add_material(s, grey, black, &room, &err),
-	                 RAD_OK);
-	assert_int_equal(rad_scene_add_material(s, black, lum, &lamp, &err),
-	                 RAD_OK);
-	assert_int_equal(rad_scene_add_material(s, black, black, &board, &err),
-	                 RAD_OK);
-	assert_int_equal(rad_scene_add_node(s, "room", &node, &err), RAD_OK);
-	const double floor[4][3] = {{0, 0, 0}, {0, 0, 4}, {4, 0, 4}, {4, 0, 0}};
-	const double wall[4][3] = {{0, 0, 0}, {4, 0, 0}, {4, 3, 0}, {0, 3, 0}};
+	const double black[3] = {0, 0, 0}, lum[3] = {2000, 2000, 2000};
+	uint32_t node;
+	rad_scene *s = floor_and_wall(&node);
+	uint32_t lamp = material(s, black, lum),
+	         board = material(s, black, black);
 	/* Facing down: the panel at 2.5 m, the board over its x < 2 half. */
 	const double panel[4][3] = {{1.5, 2.5, 1.5},
 	                            {2.5, 2.5, 1.5},
@@ -251,8 +259,6 @@ static rad_scene *luminaire_half_covered(void)
 	                            {2, 2.499, 1.4},
 	                            {2, 2.499, 2.6},
 	                            {1.4, 2.499, 2.6}};
-	add_quad(s, room, node, floor, 0);
-	add_quad(s, room, node, wall, 0);
 	add_quad(s, lamp, node, panel, 0);
 	add_quad(s, board, node, cover, 0);
 	assert_int_equal(rad_scene_commit(s, &err), RAD_OK);
@@ -275,25 +281,6 @@ static void test_luminaire_half_covered(void **state)
 			p[4] = 1;
 		}
 	hold_to_reference(s, pts, n);
-}
-
-/* luxrad-scenegen KIND, loaded. */
-static rad_scene *generated_scene(const char *kind)
-{
-	char path[] = "/tmp/luxrad-scene-XXXXXX.glb", cmd[512];
-	int fd = mkstemps(path, 4);
-	assert_true(fd >= 0);
-	close(fd);
-	snprintf(cmd, sizeof(cmd),
-	         "'%s/luxrad-scenegen' %s -o '%s' 2>/dev/null",
-	         LUXRAD_BINARY_DIR, kind, path);
-	assert_int_equal(system(cmd), 0);
-	rad_scene *s = NULL;
-	rad_error err;
-	if (rad_gltf_load_file(path, &s, NULL, &err) != RAD_OK)
-		fail_msg("%s", err.msg);
-	unlink(path);
-	return s;
 }
 
 static void test_hall_covered_ceiling(void **state)

@@ -22,6 +22,7 @@
 #include <cmocka.h>
 #include <unistd.h>
 
+#include "generated.h"
 #include "gltf.h"
 
 #include "rad.h"
@@ -291,25 +292,6 @@ static void test_slivers_stay_finite(void **state)
 		rad_solver_free(sv);
 	}
 	rad_scene_free(s);
-}
-
-/* A study scene from luxrad-scenegen (deterministic), loaded. */
-static rad_scene *generated_scene(const char *kind)
-{
-	char path[] = "/tmp/luxrad-scene-XXXXXX.glb", cmd[512];
-	int fd = mkstemps(path, 4);
-	assert_true(fd >= 0);
-	close(fd);
-	snprintf(cmd, sizeof(cmd),
-	         "'%s/luxrad-scenegen' %s -o '%s' 2>/dev/null",
-	         LUXRAD_BINARY_DIR, kind, path);
-	assert_int_equal(system(cmd), 0);
-	rad_scene *s = NULL;
-	rad_error err;
-	if (rad_gltf_load_file(path, &s, NULL, &err) != RAD_OK)
-		fail_msg("%s", err.msg);
-	unlink(path);
-	return s;
 }
 
 /* n x n upward points 0.85 m above the floor, over the scene's middle. */
