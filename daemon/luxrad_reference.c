@@ -420,7 +420,7 @@ static json_t *json_vec3(const double v[3])
 /* clang-format off */
 #define SCENE_COUNTERS(X)                                                      \
 	X(triangles_in) X(triangles_nonfinite) X(triangles_degenerate)         \
-	X(triangles_duplicate) X(polygons) X(quads) X(materials) X(materials_offered) X(lights)       \
+	X(triangles_duplicate) X(polygons) X(polygons_cut) X(quads) X(materials) X(materials_offered) X(lights)       \
 	X(emitters) X(nodes)
 #define GLTF_COUNTERS(X) X(meshes) X(primitives) X(primitives_skipped)
 /* clang-format on */

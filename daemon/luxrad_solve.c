@@ -574,7 +574,7 @@ static json_t *json_memory(const rad_mem_report *m)
 	X(refinements) X(rays)
 #define SCENE_COUNTERS(X)                                                      \
 	X(triangles_in) X(triangles_nonfinite) X(triangles_degenerate)         \
-	X(triangles_duplicate) X(polygons) X(quads) X(materials) X(materials_offered) X(lights)       \
+	X(triangles_duplicate) X(polygons) X(polygons_cut) X(quads) X(materials) X(materials_offered) X(lights)       \
 	X(emitters) X(nodes)
 #define GLTF_COUNTERS(X)                                                       \
 	X(meshes) X(primitives) X(primitives_skipped) X(textures_ignored)      \
@@ -692,9 +692,10 @@ static void print_text_scene(const report *r)
 	const rad_scene_counts *c = r->counts;
 	printf("scene %s\n", r->a->scene_path);
 	printf("  triangles %u (skipped: %u non-finite, %u degenerate, "
-	       "%u repeated), polygons %u (%u quads)\n",
+	       "%u repeated), polygons %u (%u quads; %u large ones cut "
+	       "where surfaces cross them)\n",
 	       c->triangles_in, c->triangles_nonfinite, c->triangles_degenerate,
-	       c->triangles_duplicate, c->polygons, c->quads);
+	       c->triangles_duplicate, c->polygons, c->quads, c->polygons_cut);
 	printf("  materials %u (of %u offered), emitters %u, lights %u, "
 	       "nodes %u\n",
 	       c->materials, c->materials_offered, c->emitters, c->lights,

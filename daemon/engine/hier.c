@@ -351,6 +351,21 @@ int rad_elem_can_split(const rad_hier *h, const rad_elem *e)
 	return e->level < 200 && rad_elem_edge(e) > h->min_edge;
 }
 
+void rad_elem_quarter(const rad_elem *e, int k, float p0[3], float e1[3],
+                      float e2[3])
+{
+	/* Triangle: three corner copies and the inverted centre triangle;
+	 * parallelogram: the four quarter cells.  Same orientation as e. */
+	v3 o = v3_f(e->p0), h1 = v3_scale(v3_f(e->e1), 0.5);
+	v3 h2 = v3_scale(v3_f(e->e2), 0.5);
+	v3 org[4] = {o, v3_add(o, h1), v3_add(o, h2),
+	             v3_add(v3_add(o, h1), h2)};
+	int flip = k == 3 && !e->quad;
+	v3_store_f(p0, org[k]);
+	v3_store_f(e1, flip ? v3_scale(h1, -1) : h1);
+	v3_store_f(e2, flip ? v3_scale(h2, -1) : h2);
+}
+
 uint32_t rad_elem_split(rad_hier *h, uint32_t id)
 {
 	rad_elem *e = rad_elem_at(h, id);
@@ -360,28 +375,9 @@ uint32_t rad_elem_split(rad_hier *h, uint32_t id)
 	if (c == RAD_NONE)
 		return RAD_NONE;
 	e = rad_elem_at(h, id);
-	v3 p0 = v3_f(e->p0), h1 = v3_scale(v3_f(e->e1), 0.5);
-	v3 h2 = v3_scale(v3_f(e->e2), 0.5);
-	/* Triangle: three corner copies and the inverted centre triangle;
-	 * parallelogram: the four quarter cells.  Same orientation as e. */
-	v3 org[4], d1[4], d2[4];
-	for (int k = 0; k < 4; k++) {
-		d1[k] = h1;
-		d2[k] = h2;
-	}
-	org[0] = p0;
-	org[1] = v3_add(p0, h1);
-	org[2] = v3_add(p0, h2);
-	org[3] = v3_add(org[1], h2);
-	if (!e->quad) {
-		d1[3] = v3_scale(h1, -1);
-		d2[3] = v3_scale(h2, -1);
-	}
 	for (int k = 0; k < 4; k++) {
 		rad_elem *ch = rad_elem_at(h, c + (uint32_t)k);
-		v3_store_f(ch->p0, org[k]);
-		v3_store_f(ch->e1, d1[k]);
-		v3_store_f(ch->e2, d2[k]);
+		rad_elem_quarter(e, k, ch->p0, ch->e1, ch->e2);
 		ch->area = e->area * 0.25f;
 		ch->poly = e->poly;
 		ch->parent = id;

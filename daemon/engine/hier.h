@@ -241,6 +241,10 @@ int rad_elem_can_split(const rad_hier *h, const rad_elem *e);
  */
 uint32_t rad_elem_split(rad_hier *h, uint32_t id);
 
+/* The geometry rad_elem_split gives quarter k of e (0..3), bit for bit. */
+void rad_elem_quarter(const rad_elem *e, int k, float p0[3], float e1[3],
+                      float e2[3]);
+
 /* Subdivide every polygon uniformly until edges are <= edge (matrix mesh). */
 rad_status rad_hier_mesh_uniform(rad_hier *h, double edge, rad_error *err);
 

@@ -121,7 +121,10 @@ typedef struct rad_scene_counts {
 	uint32_t triangles_degenerate; /* skipped: zero or sliver area */
 	uint32_t triangles_duplicate;  /* dropped: a copy of an earlier one,
 	                                  same vertices, same facing */
-	uint32_t polygons;             /* polygons kept (after quad merging) */
+	uint32_t polygons;             /* polygons kept (after quad merging
+	                                  and cutting) */
+	uint32_t polygons_cut;         /* large polygons cut where another
+	                                  surface runs across them */
 	uint32_t quads;                /* of which parallelograms */
 	uint32_t materials;            /* distinct materials stored */
 	uint32_t materials_offered;    /* materials offered (before sharing) */

@@ -42,11 +42,6 @@
  * (4 slots per triangle) fits 32-bit indices. */
 #define MAX_IDS (1u << 28)
 
-/* Degenerate: area below this x (longest edge)^2 (zero or sliver area). */
-#define SLIVER_REL 1e-12
-/* The normal of the stored (float) edges must agree with the input's to
- * this cosine, or rounding has made the stored shape meaningless. */
-#define FLOAT_NORMAL_COS 0.9999
 /* Quad merging: coplanarity as 1 - cos between normals, parallelogram
  * closure relative to the longest edge. */
 #define MERGE_COPLANAR 1e-6
@@ -610,14 +605,19 @@ static rad_status merge_quads(rad_scene *s, rad_error *err)
 	rad_mem_free(&s->mem, RAD_MEM_SCRATCH, pair);
 	rad_mem_free(&s->mem, RAD_MEM_GEOMETRY, s->stage);
 	s->stage = NULL;
-	/* Give back what merging freed; keeping the old block is harmless. */
+	rad_scene_fit_polys(s);
+	return RAD_OK;
+}
+
+void rad_scene_fit_polys(rad_scene *s)
+{
+	/* Keeping the old block when realloc fails is harmless. */
 	rad_poly *fit = rad_mem_realloc(&s->mem, RAD_MEM_GEOMETRY, s->polys,
-	                                (size_t)n * sizeof(*s->polys));
+	                                (size_t)s->npolys * sizeof(*s->polys));
 	if (fit) {
 		s->polys = fit;
-		s->cap_polys = n;
+		s->cap_polys = s->npolys;
 	}
-	return RAD_OK;
 }
 
 /* -------------------------------------------------------- bounds and flux */
@@ -723,6 +723,8 @@ rad_status rad_scene_commit(rad_scene *s, rad_error *err)
 	if (s->stage && (st = merge_quads(s, err)))
 		return st;
 	compute_bounds(s);
+	if ((st = rad_scene_conform(s, err)))
+		return st;
 	compute_totals(s);
 	if ((st = rad_vis_build(s, err)))
 		return st;

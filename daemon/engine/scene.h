@@ -20,6 +20,12 @@
 #include "rad.h"
 #include "vec.h"
 
+/* Degenerate: area below this x (longest edge)^2 (zero or sliver area). */
+#define SLIVER_REL 1e-12
+/* The normal of the stored (float) edges must agree with the input's to
+ * this cosine, or rounding has made the stored shape meaningless. */
+#define FLOAT_NORMAL_COS 0.9999
+
 typedef struct rad_material {
 	float rho[3];  /* diffuse reflectance per channel, [0, 1) */
 	float emit[3]; /* exitance per channel, lux (pi x luminance) */
@@ -73,6 +79,14 @@ struct rad_scene {
 	rad_scene_counts counts;
 	rad_vis *vis; /* BVH over the polygons, after commit */
 };
+
+/* Shrink the polygon array to its count (the memory merging or cutting
+ * freed goes back). */
+void rad_scene_fit_polys(rad_scene *s);
+
+/* Cut the large polygons along the lines where other polygons run right
+ * across them (conform.c); at commit, after quad merging and bounds. */
+rad_status rad_scene_conform(rad_scene *s, rad_error *err);
 
 /* Position of parametric point (s,t) on a polygon. */
 static inline v3 rad_poly_point(const rad_poly *p, double s, double t)

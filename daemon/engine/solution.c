@@ -334,6 +334,28 @@ static int elem_ok(const rad_elem *e, uint32_t np, uint32_t ne)
 	       isfinite(e->area) && e->area >= 0;
 }
 
+/*
+ * An element's shape is not data of its own: a root is its polygon, a
+ * child the quarter rad_elem_split made, bit for bit.  Checked, so that
+ * damage there (a degenerate edge, a far corner) is refused, not traced.
+ */
+static int root_matches(const rad_elem *e, const rad_poly *p)
+{
+	return !memcmp(e->p0, p->p0, sizeof e->p0) &&
+	       !memcmp(e->e1, p->e1, sizeof e->e1) &&
+	       !memcmp(e->e2, p->e2, sizeof e->e2) && e->quad == p->quad &&
+	       e->area == p->area;
+}
+
+static int quarter_matches(const rad_elem *parent, int k, const rad_elem *e)
+{
+	float p0[3], e1[3], e2[3];
+	rad_elem_quarter(parent, k, p0, e1, e2);
+	return !memcmp(e->p0, p0, sizeof p0) && !memcmp(e->e1, e1, sizeof e1) &&
+	       !memcmp(e->e2, e2, sizeof e2) && e->quad == parent->quad &&
+	       e->area == parent->area * 0.25f;
+}
+
 /* Every element reached once from the roots, children of one polygon. */
 static rad_status check_elems(rad_solution *s, uint32_t np, uint32_t ne,
                               unsigned char *seen, rad_error *err)
@@ -344,11 +366,17 @@ static rad_status check_elems(rad_solution *s, uint32_t np, uint32_t ne,
 			return rad_fail(err, RAD_ERR_INVALID,
 			                "solution: element %u is damaged", i);
 	uint32_t reached = np, leaves = 0;
-	for (uint32_t i = 0; i < np; i++)
+	for (uint32_t i = 0; i < np; i++) {
 		if (a[i].poly != i)
 			return rad_fail(err, RAD_ERR_INVALID,
 			                "solution: root %u names polygon %u", i,
 			                a[i].poly);
+		if (!root_matches(&a[i], &s->h.scene->polys[i]))
+			return rad_fail(err, RAD_ERR_INVALID,
+			                "solution: root %u is not polygon %u's "
+			                "shape",
+			                i, i);
+	}
 	/* Ids of children always exceed their parent's (breadth-first), so
 	 * one forward pass visits the forest. */
 	for (uint32_t i = 0; i < ne; i++) {
@@ -372,6 +400,11 @@ static rad_status check_elems(rad_solution *s, uint32_t np, uint32_t ne,
 				                "solution: element %u is "
 				                "shared or crosses polygons",
 				                c);
+			if (!quarter_matches(&a[i], (int)k, &a[c]))
+				return rad_fail(err, RAD_ERR_INVALID,
+				                "solution: element %u is not "
+				                "quarter %u of element %u",
+				                c, k, i);
 			seen[c] = 1;
 			reached++;
 		}

@@ -622,6 +622,28 @@ static void build_obstructed(scene *sc, const params *p)
 		box_face(me, &plate, f, 1, false);
 }
 
+/*
+ * The room as architectural exports write it (the Graz office of
+ * ../shared/scenes/real is built so): the floor and ceiling slabs run
+ * 0.3 m past the walls, and each wall 0.3 m past the walls it meets, so
+ * part of every large polygon lies outside the room, where no light
+ * goes.  A 1 m2 panel of 1000 cd/m2 hangs 8 cm under the ceiling; every
+ * surface reflects rho (default 0.5).  4 x 4 x 3 m inside.
+ */
+static void build_slabroom(scene *sc, const params *p)
+{
+	double rho = opt_or(p, O_RHO, p->rho, 0.5);
+	double lo = -0.3, hi = 4.3;
+	mesh *me = mesh_new(sc, grey(rho), "room");
+	quad(me, P(lo, 0, lo), P(lo, 0, hi), P(hi, 0, hi), P(hi, 0, lo));
+	quad(me, P(lo, 3, lo), P(hi, 3, lo), P(hi, 3, hi), P(lo, 3, hi));
+	quad(me, P(0, 0, lo), P(0, 3, lo), P(0, 3, hi), P(0, 0, hi));
+	quad(me, P(4, 0, lo), P(4, 0, hi), P(4, 3, hi), P(4, 3, lo));
+	quad(me, P(lo, 0, 0), P(hi, 0, 0), P(hi, 3, 0), P(lo, 3, 0));
+	quad(me, P(lo, 0, 4), P(lo, 3, 4), P(hi, 3, 4), P(hi, 0, 4));
+	panel_down(mesh_new(sc, emitter(1000), "panel"), 2, 3 - 0.08, 2, 1);
+}
+
 /* --------------------------------------------------------------- field */
 
 static const mat *palette(uint64_t *rng)
@@ -943,6 +965,7 @@ enum kind_id {
 	KD_BOX,
 	KD_ROOM,
 	KD_OBSTRUCTED,
+	KD_SLABROOM,
 	KD_FIELD,
 	KD_HERD,
 	KD_HALL_EMPTY,
@@ -981,6 +1004,10 @@ static const kind kinds[NKINDS] = {
 		"the room with a black plate under part of its panel:\n"
 		"direct light through an obstruction. 26 triangles ->\n"
 		"13 polygons"},
+	[KD_SLABROOM] = {"slabroom", build_slabroom, NULL, 0,
+		"a grey 4 x 4 x 3 m room whose floor, ceiling and walls\n"
+		"run 0.3 m past its corners, as architectural exports write\n"
+		"them; a 1 m2 panel 8 cm under the ceiling. 14 triangles"},
 	[KD_FIELD] = {"field", build_field, NULL, 0,
 		"random boxes, spheres and cylinders on a ground plane\n"
 		"under emissive panels and point lights (clustering)"},
@@ -1045,8 +1072,8 @@ static const opt opts[NOPTS] = {
 		"high (clear sky: about 80000)"},
 	[O_SIZE] = {"size", 0, T_VEC3, OFF(size), K(KD_BOX), 1e-6, 1e6, false,
 		"W,H,D", "box size, metres (default 1,1,1)"},
-	[O_RHO] = {"rho", 0, T_NUM, OFF(rho), K(KD_BOX) | K(KD_ROOM) | K(KD_OBSTRUCTED), 0, 0.999,
-		false, "R", "reflectance (default: box 0.5, room 0)"},
+	[O_RHO] = {"rho", 0, T_NUM, OFF(rho), K(KD_BOX) | K(KD_ROOM) | K(KD_OBSTRUCTED) | K(KD_SLABROOM), 0, 0.999,
+		false, "R", "reflectance (default: box, slabroom 0.5; room 0)"},
 	[O_EMIT] = {"emit", 0, T_NUM, OFF(emit), K(KD_BOX), 0, 1e9, false,
 		"L", "luminance of the faces, cd/m2 (def. 100)"},
 	[O_SUBDIV] = {"subdiv", 0, T_NUM, OFF(subdiv), K(KD_BOX), 1, 512, true,

@@ -72,6 +72,7 @@ scenes=(
 	"box-0.99|$(gen box-0.99 box --rho 0.99)|$VAL/box.points|exact:31415.92654"
 	"box16-0.7|$(gen box16-0.7 box --rho 0.7 --subdiv 16)|$VAL/box.points|exact:1047.197551"
 	"room-0.9|$(gen room-0.9 room --rho 0.9)|$VAL/room.points|mc"
+	"slabroom|$(gen slabroom slabroom)|$VAL/slabroom.points|mc"
 	"graz|$REAL/renderpark/graz.gltf|$VAL/graz.points|mc"
 	"hospital|$REAL/renderpark/hospital.gltf|$VAL/hospital.points|mc"
 	"blender-cornell|$REAL/vinc3r-cornellbox/BJS-2.80-Eevee-gltf/cornellBox-2.80-Eevee-gltf.gltf|$VAL/blender-cornell.points|mc"

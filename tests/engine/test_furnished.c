@@ -32,6 +32,8 @@
  *
  * A ceiling luminaire half covered by a black board 1 mm below it
  * (luminaire_half_covered).
+ *
+ * A room whose slabs and walls run past its corners (test_slab_room).
  */
 #include <math.h>
 #include <setjmp.h>
@@ -283,20 +285,46 @@ static void test_luminaire_half_covered(void **state)
 	hold_to_reference(s, pts, n);
 }
 
+/* A 5 x 5 work plane at 0.8 m: x0 + i dx, z0 + j dz. */
+static void grid_5x5(double pts[MAXPTS][6], double x0, double dx, double z0,
+                     double dz)
+{
+	for (int i = 0; i < 5; i++)
+		for (int j = 0; j < 5; j++) {
+			double *p = pts[i * 5 + j];
+			p[0] = x0 + dx * i;
+			p[1] = 0.8;
+			p[2] = z0 + dz * j;
+			p[3] = p[5] = 0;
+			p[4] = 1;
+		}
+}
+
 static void test_hall_covered_ceiling(void **state)
 {
 	(void)state;
 	rad_scene *s = generated_scene("hall-bright"); /* 24 x 6 x 16 m */
 	double pts[MAXPTS][6];
-	for (int i = 0; i < 5; i++)
-		for (int j = 0; j < 5; j++) {
-			double *p = pts[i * 5 + j];
-			p[0] = 1 + 5.5 * i;
-			p[1] = 0.8;
-			p[2] = 1 + 3.5 * j;
-			p[3] = p[5] = 0;
-			p[4] = 1;
-		}
+	grid_5x5(pts, 1, 5.5, 1, 3.5);
+	hold_to_reference(s, pts, MAXPTS);
+}
+
+/*
+ * A room as architectural exports write it (luxrad-scenegen slabroom):
+ * floor, ceiling and walls run 0.3 m past its corners.  The parts beyond
+ * are dark, and before the commit cut those polygons along the walls
+ * (conform.c) hr read the work plane 3-10 % low.  The polygons must come
+ * out cut: six large ones, each along two lines.
+ */
+static void test_slab_room(void **state)
+{
+	(void)state;
+	rad_scene *s = generated_scene("slabroom"); /* 4 x 3 x 4 m inside */
+	rad_scene_counts c;
+	rad_scene_counts_get(s, &c);
+	assert_int_equal(c.polygons_cut, 6);
+	double pts[MAXPTS][6];
+	grid_5x5(pts, 0.5, 0.75, 0.5, 0.75);
 	hold_to_reference(s, pts, MAXPTS);
 }
 
@@ -307,6 +335,7 @@ int main(void)
 	        cmocka_unit_test(test_hall_covered_ceiling),
 	        cmocka_unit_test(test_bulb_written_twice),
 	        cmocka_unit_test(test_luminaire_half_covered),
+	        cmocka_unit_test(test_slab_room),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -1,0 +1,412 @@
+/*
+ * conform.c -- cutting large polygons where another surface runs right
+ * across them (rad_scene_conform, called at commit).
+ *
+ * Architectural models let slabs and walls run through each other: the
+ * Graz office of ../shared/scenes/real has its floor and ceiling 0.3 m
+ * past its walls, and each wall 0.3 m past the walls it meets.  The part
+ * beyond is outside the room, where no light goes, yet it belongs to a
+ * polygon that is lit inside.  A hierarchical solver samples such a
+ * polygon on a few points per element: where they straddle the wall the
+ * element's mean is diluted by the dark part and handed to its lit
+ * children, and where they do not the dark part is lit with the rest.
+ * Measured on luxrad-scenegen slabroom (every large polygon 0.3 m past
+ * the room) against luxrad-reference, hr at defaults: -25 % at worst,
+ * 7.4 % on average; the same room without the overhang: -1.9 %, 0.6 %.
+ * Radiosity is discontinuous along such a line (a D0 discontinuity, in
+ * discontinuity meshing's terms), and no element should straddle it.
+ *
+ * So a large polygon P is cut along the line where another polygon Q
+ * crosses or stands on P's plane, when that line runs across P from
+ * boundary to boundary: a wall standing on a floor from one edge of it
+ * to the other, a slab through a wall.  A partition that ends inside the
+ * floor does not cut it (the floor on both sides is one room), nor does a
+ * table leg.  Pieces are convex; each becomes a parallelogram when it is
+ * one (the usual case: walls parallel to the floor's edges) or a fan of
+ * triangles.  Every piece keeps P's material, node and facing, and the
+ * pieces' areas add up to P's.
+ *
+ * Cost: only polygons of at least LARGE_SHARE of the scene's area are
+ * cut (a floor, a wall, a ceiling; their count is bounded by 1 /
+ * LARGE_SHARE), each tested against the bounding boxes of all polygons.
+ */
+#include <float.h>
+#include <math.h>
+#include <string.h>
+
+#include "err.h"
+#include "scene.h"
+
+#define LARGE_SHARE 1e-3 /* of the total area: polygons that may be cut */
+#define MAX_VERTS 12     /* of one convex piece */
+#define MAX_PIECES 64    /* of one polygon */
+#define TOL_REL 1e-5     /* on-plane tolerance, x the scene's size */
+#define MIN_PIECE 1e-3   /* smallest piece, x the polygon's area */
+#define JOIN_REL 1e-4    /* segments meeting, x the scene's size */
+#define MAX_SEGS 256     /* crossing segments looked at per polygon */
+
+typedef struct piece {
+	v3 v[MAX_VERTS];
+	int n;
+} piece;
+
+static int poly_verts(const rad_poly *p, v3 v[4])
+{
+	v[0] = rad_poly_point(p, 0, 0);
+	v[1] = rad_poly_point(p, 1, 0);
+	if (!p->quad) {
+		v[2] = rad_poly_point(p, 0, 1);
+		return 3;
+	}
+	v[2] = rad_poly_point(p, 1, 1);
+	v[3] = rad_poly_point(p, 0, 1);
+	return 4;
+}
+
+static double piece_area(const piece *pc, v3 n)
+{
+	v3 sum = v3_make(0, 0, 0);
+	for (int i = 1; i + 1 < pc->n; i++)
+		sum = v3_add(sum, v3_cross(v3_sub(pc->v[i], pc->v[0]),
+		                           v3_sub(pc->v[i + 1], pc->v[0])));
+	return 0.5 * v3_dot(sum, n);
+}
+
+/*
+ * The segment where polygon q meets the plane (x - o) . n = 0, within tol:
+ * its ends in a, b.  0 if q does not reach the plane from both sides (or
+ * touch it along an edge), or lies in it.
+ */
+static int plane_segment(const rad_poly *q, v3 o, v3 n, double tol, v3 *a,
+                         v3 *b)
+{
+	v3 v[4];
+	int nv = poly_verts(q, v), on = 0, above = 0, below = 0, m = 0;
+	double d[4];
+	v3 pts[8];
+	for (int i = 0; i < nv; i++) {
+		d[i] = v3_dot(v3_sub(v[i], o), n);
+		if (fabs(d[i]) <= tol) {
+			on++;
+			pts[m++] = v[i];
+		} else if (d[i] > 0) {
+			above++;
+		} else {
+			below++;
+		}
+	}
+	if (on == nv || (!(above && below) && on < 2))
+		return 0;
+	for (int i = 0; i < nv; i++) {
+		int j = (i + 1) % nv;
+		if ((d[i] > tol && d[j] < -tol) ||
+		    (d[i] < -tol && d[j] > tol)) {
+			double t = d[i] / (d[i] - d[j]);
+			pts[m++] =
+			        v3_add(v[i], v3_scale(v3_sub(v[j], v[i]), t));
+		}
+	}
+	if (m < 2)
+		return 0;
+	/* The two points farthest apart: the segment's ends. */
+	double best = -1;
+	*a = *b = pts[0];
+	for (int i = 0; i < m; i++)
+		for (int j = i + 1; j < m; j++) {
+			v3 e = v3_sub(pts[j], pts[i]);
+			double l2 = v3_dot(e, e);
+			if (l2 > best) {
+				best = l2;
+				*a = pts[i];
+				*b = pts[j];
+			}
+		}
+	return best > tol * tol;
+}
+
+/*
+ * Cut piece pc by the line through a, b (in its plane, normal n) when
+ * both sides keep at least min_area and, unless the segment is anchored
+ * at both ends (see cut_polygon), the segment [a, b] spans the piece's
+ * whole chord along that line.  The halves go to lo and hi.
+ */
+static int cut_piece(const piece *pc, v3 n, v3 a, v3 b, int anchored,
+                     double tol, double min_area, piece *lo, piece *hi)
+{
+	v3 u = v3_sub(b, a);
+	double len = v3_len(u);
+	u = v3_scale(u, 1 / len);
+	v3 side = v3_cross(n, u); /* in the plane, across the line */
+	double s[MAX_VERTS];
+	int pos = 0, neg = 0;
+	for (int i = 0; i < pc->n; i++) {
+		s[i] = v3_dot(v3_sub(pc->v[i], a), side);
+		pos += s[i] > tol;
+		neg += s[i] < -tol;
+	}
+	if (!pos || !neg)
+		return 0;
+	lo->n = hi->n = 0;
+	double tmin = INFINITY, tmax = -INFINITY;
+	for (int i = 0; i < pc->n; i++) {
+		int j = (i + 1) % pc->n;
+		if (s[i] >= -tol && hi->n < MAX_VERTS)
+			hi->v[hi->n++] = pc->v[i];
+		if (s[i] <= tol && lo->n < MAX_VERTS)
+			lo->v[lo->n++] = pc->v[i];
+		if (fabs(s[i]) <= tol) {
+			double t = v3_dot(v3_sub(pc->v[i], a), u);
+			tmin = fmin(tmin, t);
+			tmax = fmax(tmax, t);
+		}
+		if ((s[i] > tol && s[j] < -tol) ||
+		    (s[i] < -tol && s[j] > tol)) {
+			double f = s[i] / (s[i] - s[j]);
+			v3 x = v3_add(pc->v[i],
+			              v3_scale(v3_sub(pc->v[j], pc->v[i]), f));
+			if (hi->n < MAX_VERTS)
+				hi->v[hi->n++] = x;
+			if (lo->n < MAX_VERTS)
+				lo->v[lo->n++] = x;
+			double t = v3_dot(v3_sub(x, a), u);
+			tmin = fmin(tmin, t);
+			tmax = fmax(tmax, t);
+		}
+	}
+	if (lo->n == MAX_VERTS || hi->n == MAX_VERTS)
+		return 0;
+	/* The chord [tmin, tmax] must lie within the segment [0, len]. */
+	if (!anchored && (tmin < -tol || tmax > len + tol))
+		return 0;
+	return piece_area(lo, n) >= min_area && piece_area(hi, n) >= min_area;
+}
+
+/* Polygon p's bounding box, grown by tol. */
+static void poly_box(const rad_poly *p, double tol, float box[6])
+{
+	v3 v[4];
+	int nv = poly_verts(p, v);
+	double lo[3] = {INFINITY, INFINITY, INFINITY};
+	double hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+	for (int i = 0; i < nv; i++) {
+		double c[3] = {v[i].x, v[i].y, v[i].z};
+		for (int k = 0; k < 3; k++) {
+			lo[k] = fmin(lo[k], c[k]);
+			hi[k] = fmax(hi[k], c[k]);
+		}
+	}
+	for (int k = 0; k < 3; k++) {
+		box[k] = (float)(lo[k] - tol);
+		box[3 + k] = (float)(hi[k] + tol);
+	}
+}
+
+static int boxes_meet(const float *a, const float *b)
+{
+	for (int k = 0; k < 3; k++)
+		if (a[k] > b[3 + k] || b[k] > a[3 + k])
+			return 0;
+	return 1;
+}
+
+/* 1 if x (in polygon p's plane) lies strictly inside p, by more than tol. */
+static int inside_poly(const rad_poly *p, v3 x, double tol)
+{
+	v3 v[4], n = v3_f(p->n);
+	int nv = poly_verts(p, v);
+	for (int i = 0; i < nv; i++) {
+		v3 e = v3_sub(v[(i + 1) % nv], v[i]);
+		v3 in = v3_norm(v3_cross(n, e)); /* points inwards */
+		if (v3_dot(v3_sub(x, v[i]), in) <= tol)
+			return 0;
+	}
+	return 1;
+}
+
+/* Distance from x to the segment [a, b]. */
+static double seg_dist(v3 x, v3 a, v3 b)
+{
+	v3 ab = v3_sub(b, a);
+	double l2 = v3_dot(ab, ab);
+	double t = l2 > 0 ? v3_dot(v3_sub(x, a), ab) / l2 : 0;
+	t = t < 0 ? 0 : t > 1 ? 1 : t;
+	return v3_len(v3_sub(x, v3_add(a, v3_scale(ab, t))));
+}
+
+typedef struct seg {
+	v3 a, b;
+	int large; /* made by a large polygon (a wall, a slab) */
+} seg;
+
+/*
+ * Cut polygon i along the surfaces that run across it; returns the piece
+ * count.  A segment where another polygon meets i's plane cuts along its
+ * whole line when each of its ends is anchored: off i (past its boundary)
+ * or on another such segment (walls that meet at a corner, standing on a
+ * slab that runs past them: the four together close a room).  A segment
+ * with a free end -- a partition that stops inside the room, a table leg
+ * -- cuts only if it spans the piece from boundary to boundary.
+ */
+static int cut_polygon(const rad_scene *s, uint32_t i, const float *boxes,
+                       double large, double tol, double jtol, piece *out,
+                       seg *segs)
+{
+	const rad_poly *p = &s->polys[i];
+	v3 n = v3_f(p->n), o = rad_poly_point(p, 0, 0);
+	double min_area = MIN_PIECE * p->area;
+	int ns = 0;
+	for (uint32_t j = 0; j < s->npolys && ns < MAX_SEGS; j++) {
+		if (j == i ||
+		    !boxes_meet(boxes + 6 * (size_t)i, boxes + 6 * (size_t)j))
+			continue;
+		if (plane_segment(&s->polys[j], o, n, tol, &segs[ns].a,
+		                  &segs[ns].b)) {
+			segs[ns].large = s->polys[j].area >= large;
+			ns++;
+		}
+	}
+	int np = 1;
+	out[0].n = poly_verts(p, out[0].v);
+	for (int k = 0; k < ns; k++) {
+		int anchored = segs[k].large;
+		for (int e = 0; e < 2 && anchored; e++) {
+			v3 x = e ? segs[k].b : segs[k].a;
+			if (!inside_poly(p, x, tol))
+				continue;
+			int met = 0;
+			for (int m = 0; m < ns && !met; m++)
+				met = m != k && segs[m].large &&
+				      seg_dist(x, segs[m].a, segs[m].b) <= jtol;
+			anchored = met;
+		}
+		for (int q = 0; q < np && np < MAX_PIECES; q++) {
+			piece lo, hi;
+			if (!cut_piece(&out[q], n, segs[k].a, segs[k].b,
+			               anchored, tol, min_area, &lo, &hi))
+				continue;
+			out[q] = lo;
+			out[np++] = hi;
+		}
+	}
+	return np;
+}
+
+static int is_parallelogram(const piece *pc, double tol)
+{
+	if (pc->n != 4)
+		return 0;
+	v3 d = v3_sub(v3_add(pc->v[0], pc->v[2]), v3_add(pc->v[1], pc->v[3]));
+	return v3_len(d) <= tol;
+}
+
+/*
+ * Store q's edges e1, e2 from origin o and check them as the scene builder
+ * checks an input triangle (scene.c, make_triangle): no sliver, and the
+ * float edges must still give the normal n.
+ */
+static int set_edges(rad_poly *q, v3 o, v3 e1, v3 e2, int quad, v3 n)
+{
+	double lmax2 = fmax(v3_dot(e1, e1), v3_dot(e2, e2));
+	double area = v3_dot(v3_cross(e1, e2), n) * (quad ? 1 : 0.5);
+	v3_store_f(q->p0, o);
+	v3_store_f(q->e1, e1);
+	v3_store_f(q->e2, e2);
+	v3 cf = v3_cross(v3_f(q->e1), v3_f(q->e2));
+	q->area = (float)area;
+	q->quad = (uint8_t)quad;
+	return area > SLIVER_REL * lmax2 && q->area > 0 &&
+	       v3_dot(cf, n) > FLOAT_NORMAL_COS * v3_len(cf);
+}
+
+/* Store piece pc of polygon p (its material, node, normal) at out:
+ * returns the polygons made, or -1 if one would be degenerate. */
+static int emit_piece(const rad_poly *p, const piece *pc, double tol,
+                      rad_poly *out)
+{
+	v3 n = v3_f(p->n);
+	if (is_parallelogram(pc, tol)) {
+		out[0] = *p;
+		return set_edges(&out[0], pc->v[0], v3_sub(pc->v[1], pc->v[0]),
+		                 v3_sub(pc->v[3], pc->v[0]), 1, n)
+		               ? 1
+		               : -1;
+	}
+	int m = 0;
+	for (int k = 1; k + 1 < pc->n; k++) {
+		v3 e1 = v3_sub(pc->v[k], pc->v[0]);
+		v3 e2 = v3_sub(pc->v[k + 1], pc->v[0]);
+		if (!(v3_len(v3_cross(e1, e2)) > tol * v3_len(v3_sub(e2, e1))))
+			continue; /* a vertex on the line of its neighbours */
+		out[m] = *p;
+		if (!set_edges(&out[m], pc->v[0], e1, e2, 0, n))
+			return -1;
+		m++;
+	}
+	return m;
+}
+
+rad_status rad_scene_conform(rad_scene *s, rad_error *err)
+{
+	double total = 0;
+	for (uint32_t i = 0; i < s->npolys; i++)
+		total += s->polys[i].area;
+	double large = LARGE_SHARE * total, tol = TOL_REL * s->diag;
+	double jtol = JOIN_REL * s->diag;
+	uint32_t nlarge = 0;
+	for (uint32_t i = 0; i < s->npolys; i++)
+		nlarge += s->polys[i].area >= large;
+	if (nlarge == 0)
+		return RAD_OK;
+	float *boxes = rad_mem_alloc(&s->mem, RAD_MEM_SCRATCH,
+	                             6 * (size_t)s->npolys * sizeof(float));
+	piece *pcs = rad_mem_alloc(&s->mem, RAD_MEM_SCRATCH,
+	                           MAX_PIECES * sizeof(piece));
+	seg *segs =
+	        rad_mem_alloc(&s->mem, RAD_MEM_SCRATCH, MAX_SEGS * sizeof(seg));
+	/* Each piece gives at most MAX_VERTS - 2 triangles. */
+	size_t cap = (size_t)s->npolys +
+	             (size_t)nlarge * MAX_PIECES * (MAX_VERTS - 2);
+	rad_poly *polys =
+	        rad_mem_alloc(&s->mem, RAD_MEM_GEOMETRY, cap * sizeof(*polys));
+	if (!boxes || !pcs || !segs || !polys) {
+		rad_mem_free(&s->mem, RAD_MEM_SCRATCH, segs);
+		rad_mem_free(&s->mem, RAD_MEM_SCRATCH, boxes);
+		rad_mem_free(&s->mem, RAD_MEM_SCRATCH, pcs);
+		rad_mem_free(&s->mem, RAD_MEM_GEOMETRY, polys);
+		return rad_fail(err, RAD_ERR_NOMEM,
+		                "commit: out of memory cutting %u polygons",
+		                nlarge);
+	}
+	for (uint32_t i = 0; i < s->npolys; i++)
+		poly_box(&s->polys[i], tol, boxes + 6 * (size_t)i);
+	uint32_t n = 0;
+	for (uint32_t i = 0; i < s->npolys; i++) {
+		const rad_poly *p = &s->polys[i];
+		int np = p->area >= large ? cut_polygon(s, i, boxes, large, tol,
+		                                        jtol, pcs, segs)
+		                          : 1;
+		if (np == 1) {
+			polys[n++] = *p;
+			continue;
+		}
+		uint32_t made = 0;
+		for (int k = 0; k < np && made != UINT32_MAX; k++) {
+			int m = emit_piece(p, &pcs[k], tol, polys + n + made);
+			made = m < 0 ? UINT32_MAX : made + (uint32_t)m;
+		}
+		if (made == UINT32_MAX) { /* a piece would be degenerate */
+			polys[n++] = *p;
+			continue;
+		}
+		n += made;
+		s->counts.polygons_cut++;
+	}
+	rad_mem_free(&s->mem, RAD_MEM_SCRATCH, segs);
+	rad_mem_free(&s->mem, RAD_MEM_SCRATCH, boxes);
+	rad_mem_free(&s->mem, RAD_MEM_SCRATCH, pcs);
+	rad_mem_free(&s->mem, RAD_MEM_GEOMETRY, s->polys);
+	s->polys = polys;
+	s->npolys = s->cap_polys = n;
+	rad_scene_fit_polys(s);
+	return RAD_OK;
+}
