@@ -37,13 +37,14 @@
 #include "err.h"
 #include "scene.h"
 
-#define LARGE_SHARE 1e-3 /* of the total area: polygons that may be cut */
-#define MAX_VERTS 12     /* of one convex piece */
-#define MAX_PIECES 64    /* of one polygon */
-#define TOL_REL 1e-5     /* on-plane tolerance, x the scene's size */
-#define MIN_PIECE 1e-3   /* smallest piece, x the polygon's area */
-#define JOIN_REL 1e-4    /* segments meeting, x the scene's size */
-#define MAX_SEGS 256     /* crossing segments looked at per polygon */
+#define LARGE_SHARE 1e-3  /* of the total area: polygons that may be cut */
+#define MAX_VERTS 12      /* of one convex piece */
+#define MAX_PIECES 64     /* of one polygon */
+#define TOL_REL 1e-5      /* on-plane tolerance, x the scene's size */
+#define MIN_PIECE 1e-3    /* smallest piece, x the polygon's area */
+#define JOIN_REL 1e-4     /* segments meeting, x the scene's size */
+#define MAX_SEGS 256      /* crossing segments looked at per polygon */
+#define ANCHOR_SHARE 0.05 /* anchoring walls, x the cut polygon's area */
 
 typedef struct piece {
 	v3 v[MAX_VERTS];
@@ -241,11 +242,14 @@ typedef struct seg {
 /*
  * Cut polygon i along the surfaces that run across it; returns the piece
  * count.  A segment where another polygon meets i's plane cuts along its
- * whole line when each of its ends is anchored: off i (past its boundary)
- * or on another such segment (walls that meet at a corner, standing on a
- * slab that runs past them: the four together close a room).  A segment
- * with a free end -- a partition that stops inside the room, a table leg
- * -- cuts only if it spans the piece from boundary to boundary.
+ * whole line when it spans the piece from boundary to boundary, or when
+ * it comes from a wall (a large polygon, at least ANCHOR_SHARE of i's
+ * area) and each of its ends is anchored: off i, or on another wall's
+ * segment (walls that meet at a corner, standing on a slab that runs
+ * past them: the four together close a room).  A partition that stops
+ * inside the room, a table leg, a chair standing on the floor do not cut
+ * it (measured: letting furniture loops cut the office floor moved its
+ * corner points from +3.8 to +4.3 %, +7.3 % at --accuracy 0.01).
  */
 static int cut_polygon(const rad_scene *s, uint32_t i, const float *boxes,
                        double large, double tol, double jtol, piece *out,
@@ -261,7 +265,9 @@ static int cut_polygon(const rad_scene *s, uint32_t i, const float *boxes,
 			continue;
 		if (plane_segment(&s->polys[j], o, n, tol, &segs[ns].a,
 		                  &segs[ns].b)) {
-			segs[ns].large = s->polys[j].area >= large;
+			segs[ns].large =
+			        s->polys[j].area >= large &&
+			        s->polys[j].area >= ANCHOR_SHARE * p->area;
 			ns++;
 		}
 	}

@@ -808,6 +808,69 @@ static void test_scene_drops_repeated_triangles(void **state)
 	rad_scene_free(s);
 }
 
+/* Commit s and return its counts and its polygons' total area. */
+static double commit_area(rad_scene *s, rad_scene_counts *c)
+{
+	commit_ok(s);
+	rad_scene_counts_get(s, c);
+	double a = 0;
+	for (uint32_t i = 0; i < s->npolys; i++)
+		a += s->polys[i].area;
+	return a;
+}
+
+/*
+ * Cutting at commit (conform.c).  A wall standing across a floor from
+ * edge to edge cuts it in two; a partition that stops inside the floor
+ * does not; four walls meeting at their corners on a floor that runs past
+ * them cut it along their four lines (3 x 3 pieces); a small box standing
+ * on it does not.  The area is kept.
+ */
+static void test_scene_cuts_along_walls(void **state)
+{
+	(void)state;
+	rad_scene_counts c;
+	/* floor 4 x 4 facing +y, a 2 m wall at x = 1 across it */
+	rad_scene *s = scene_start();
+	add_quad(s, 0, 0, V(0, 0, 0), V(0, 0, 4), V(4, 0, 0));
+	add_quad(s, 0, 0, V(1, 0, 0), V(0, 2, 0), V(0, 0, 4));
+	assert_float_equal(commit_area(s, &c), 24, 1e-5);
+	assert_int_equal(c.polygons_cut, 1);
+	assert_int_equal(c.polygons, 3);
+	assert_int_equal(c.quads, 3);
+	rad_scene_free(s);
+	/* the same wall, stopping half-way */
+	s = scene_start();
+	add_quad(s, 0, 0, V(0, 0, 0), V(0, 0, 4), V(4, 0, 0));
+	add_quad(s, 0, 0, V(1, 0, 0), V(0, 2, 0), V(0, 0, 2));
+	assert_float_equal(commit_area(s, &c), 20, 1e-5);
+	assert_int_equal(c.polygons_cut, 0);
+	assert_int_equal(c.polygons, 2);
+	rad_scene_free(s);
+	/* a 6 x 6 floor, a 4 x 4 room of walls meeting at its corners */
+	s = scene_start();
+	add_quad(s, 0, 0, V(-1, 0, -1), V(0, 0, 6), V(6, 0, 0));
+	add_quad(s, 0, 0, V(0, 0, 0), V(0, 2, 0), V(0, 0, 4));
+	add_quad(s, 0, 0, V(4, 0, 0), V(0, 0, 4), V(0, 2, 0));
+	add_quad(s, 0, 0, V(0, 0, 0), V(4, 0, 0), V(0, 2, 0));
+	add_quad(s, 0, 0, V(0, 0, 4), V(0, 2, 0), V(4, 0, 0));
+	assert_float_equal(commit_area(s, &c), 36 + 4 * 8, 1e-4);
+	assert_int_equal(c.polygons_cut, 1);
+	assert_int_equal(c.polygons, 9 + 4);
+	rad_scene_free(s);
+	/* a 0.1 m box standing on the 4 x 4 floor */
+	s = scene_start();
+	add_quad(s, 0, 0, V(0, 0, 0), V(0, 0, 4), V(4, 0, 0));
+	add_quad(s, 0, 0, V(2, 0, 2), V(0, 0.1, 0), V(0, 0, 0.1));
+	add_quad(s, 0, 0, V(2.1, 0, 2), V(0, 0, 0.1), V(0, 0.1, 0));
+	add_quad(s, 0, 0, V(2, 0, 2), V(0.1, 0, 0), V(0, 0.1, 0));
+	add_quad(s, 0, 0, V(2, 0, 2.1), V(0, 0.1, 0), V(0.1, 0, 0));
+	commit_area(s, &c);
+	assert_int_equal(c.polygons_cut, 0);
+	assert_int_equal(c.polygons, 5);
+	rad_scene_free(s);
+}
+
 static void test_scene_merges_square_into_one_parallelogram(void **state)
 {
 	(void)state;
@@ -1044,6 +1107,7 @@ int main(void)
 	        cmocka_unit_test(
 	                test_scene_merges_square_into_one_parallelogram),
 	        cmocka_unit_test(test_scene_drops_repeated_triangles),
+	        cmocka_unit_test(test_scene_cuts_along_walls),
 	        cmocka_unit_test(
 	                test_scene_merges_triangulated_grid_into_cells),
 	        cmocka_unit_test(test_scene_keeps_non_parallelogram_pairs),
