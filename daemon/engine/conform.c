@@ -18,19 +18,21 @@
  *
  * So a large polygon P is cut along the line where another polygon Q
  * crosses or stands on P's plane, when that line runs across P from
- * boundary to boundary: a wall standing on a floor from one edge of it
- * to the other, a slab through a wall.  A partition that ends inside the
- * floor does not cut it (the floor on both sides is one room), nor does a
- * table leg.  Pieces are convex; each becomes a parallelogram when it is
- * one (the usual case: walls parallel to the floor's edges) or a fan of
- * triangles.  Every piece keeps P's material, node and facing, and the
- * pieces' areas add up to P's.
+ * boundary to boundary (a wall standing on a floor from one edge of it
+ * to the other, a slab through a wall), or when Q is a wall of P's size
+ * whose contact ends off P or on another such wall's (walls meeting at
+ * the corners of a room, on a slab that runs past them): see
+ * cut_polygon.  A partition that ends inside the floor does not cut it
+ * (the floor on both sides is one room), nor does furniture.  Pieces are
+ * convex; each becomes a parallelogram when it is one (the usual case:
+ * walls parallel to the floor's edges) or a fan of triangles.  Every
+ * piece keeps P's material, node and facing, and the pieces' areas add
+ * up to P's.
  *
  * Cost: only polygons of at least LARGE_SHARE of the scene's area are
  * cut (a floor, a wall, a ceiling; their count is bounded by 1 /
  * LARGE_SHARE), each tested against the bounding boxes of all polygons.
  */
-#include <float.h>
 #include <math.h>
 #include <string.h>
 
@@ -236,7 +238,7 @@ static double seg_dist(v3 x, v3 a, v3 b)
 
 typedef struct seg {
 	v3 a, b;
-	int large; /* made by a large polygon (a wall, a slab) */
+	int large; /* made by a wall (see cut_polygon) */
 } seg;
 
 /*
@@ -258,19 +260,21 @@ static int cut_polygon(const rad_scene *s, uint32_t i, const float *boxes,
 	const rad_poly *p = &s->polys[i];
 	v3 n = v3_f(p->n), o = rad_poly_point(p, 0, 0);
 	double min_area = MIN_PIECE * p->area;
+	double wall = fmax(large, ANCHOR_SHARE * p->area);
 	int ns = 0;
-	for (uint32_t j = 0; j < s->npolys && ns < MAX_SEGS; j++) {
-		if (j == i ||
-		    !boxes_meet(boxes + 6 * (size_t)i, boxes + 6 * (size_t)j))
-			continue;
-		if (plane_segment(&s->polys[j], o, n, tol, &segs[ns].a,
-		                  &segs[ns].b)) {
-			segs[ns].large =
-			        s->polys[j].area >= large &&
-			        s->polys[j].area >= ANCHOR_SHARE * p->area;
-			ns++;
+	/* Walls first: when more than MAX_SEGS surfaces meet i, the
+	 * furniture is what is left out. */
+	for (int pass = 0; pass < 2; pass++)
+		for (uint32_t j = 0; j < s->npolys && ns < MAX_SEGS; j++) {
+			int is_wall = s->polys[j].area >= wall;
+			if (j == i || is_wall != !pass ||
+			    !boxes_meet(boxes + 6 * (size_t)i,
+			                boxes + 6 * (size_t)j))
+				continue;
+			if (plane_segment(&s->polys[j], o, n, tol, &segs[ns].a,
+			                  &segs[ns].b))
+				segs[ns++].large = is_wall;
 		}
-	}
 	int np = 1;
 	out[0].n = poly_verts(p, out[0].v);
 	for (int k = 0; k < ns; k++) {
