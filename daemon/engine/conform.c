@@ -178,8 +178,12 @@ static int cut_piece(const piece *pc, v3 n, v3 a, v3 b, int anchored,
 	}
 	if (lo->n == MAX_VERTS || hi->n == MAX_VERTS)
 		return 0;
-	/* The chord [tmin, tmax] must lie within the segment [0, len]. */
+	/* The chord [tmin, tmax] must lie within the segment [0, len], or
+	 * for an anchored segment at least meet it: a wall that stands
+	 * beside the piece does not cut it along its extension. */
 	if (!anchored && (tmin < -tol || tmax > len + tol))
+		return 0;
+	if (tmax < -tol || tmin > len + tol)
 		return 0;
 	return piece_area(lo, n) >= min_area && piece_area(hi, n) >= min_area;
 }

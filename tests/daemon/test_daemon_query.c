@@ -178,7 +178,7 @@ static void test_upload_reports_what_luxrad_solve_reports(void **state)
 	json_t *info =
 	        dm_ok(c, "{s:s, s:O}", "cmd", "scene.info", "scene", ids[0]);
 	assert_int_equal(dm_int(dm_get(info, "counts"), "triangles_in"), 32);
-	assert_int_equal(dm_int(dm_get(info, "counts"), "polygons"), 77);
+	assert_int_equal(dm_int(dm_get(info, "counts"), "polygons"), 51);
 	json_decref(info);
 
 	json_t *l = dm_ok(c, "{s:s}", "cmd", "scene.list");
