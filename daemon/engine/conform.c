@@ -53,19 +53,6 @@ typedef struct piece {
 	int n;
 } piece;
 
-static int poly_verts(const rad_poly *p, v3 v[4])
-{
-	v[0] = rad_poly_point(p, 0, 0);
-	v[1] = rad_poly_point(p, 1, 0);
-	if (!p->quad) {
-		v[2] = rad_poly_point(p, 0, 1);
-		return 3;
-	}
-	v[2] = rad_poly_point(p, 1, 1);
-	v[3] = rad_poly_point(p, 0, 1);
-	return 4;
-}
-
 static double piece_area(const piece *pc, v3 n)
 {
 	v3 sum = v3_make(0, 0, 0);
@@ -84,7 +71,7 @@ static int plane_segment(const rad_poly *q, v3 o, v3 n, double tol, v3 *a,
                          v3 *b)
 {
 	v3 v[4];
-	int nv = poly_verts(q, v), on = 0, above = 0, below = 0, m = 0;
+	int nv = rad_poly_corners(q, v), on = 0, above = 0, below = 0, m = 0;
 	double d[4];
 	v3 pts[8];
 	for (int i = 0; i < nv; i++) {
@@ -192,7 +179,7 @@ static int cut_piece(const piece *pc, v3 n, v3 a, v3 b, int anchored,
 static void poly_box(const rad_poly *p, double tol, float box[6])
 {
 	v3 v[4];
-	int nv = poly_verts(p, v);
+	int nv = rad_poly_corners(p, v);
 	double lo[3] = {INFINITY, INFINITY, INFINITY};
 	double hi[3] = {-INFINITY, -INFINITY, -INFINITY};
 	for (int i = 0; i < nv; i++) {
@@ -220,7 +207,7 @@ static int boxes_meet(const float *a, const float *b)
 static int inside_poly(const rad_poly *p, v3 x, double tol)
 {
 	v3 v[4], n = v3_f(p->n);
-	int nv = poly_verts(p, v);
+	int nv = rad_poly_corners(p, v);
 	for (int i = 0; i < nv; i++) {
 		v3 e = v3_sub(v[(i + 1) % nv], v[i]);
 		v3 in = v3_norm(v3_cross(n, e)); /* points inwards */
@@ -271,7 +258,7 @@ static int cut_polygon(const rad_scene *s, uint32_t i, const float *boxes,
 	for (int pass = 0; pass < 2; pass++)
 		for (uint32_t j = 0; j < s->npolys && ns < MAX_SEGS; j++) {
 			int is_wall = s->polys[j].area >= wall;
-			if (j == i || is_wall != !pass ||
+			if (j == i || is_wall != (pass == 0) ||
 			    !boxes_meet(boxes + 6 * (size_t)i,
 			                boxes + 6 * (size_t)j))
 				continue;
@@ -280,7 +267,7 @@ static int cut_polygon(const rad_scene *s, uint32_t i, const float *boxes,
 				segs[ns++].large = is_wall;
 		}
 	int np = 1;
-	out[0].n = poly_verts(p, out[0].v);
+	out[0].n = rad_poly_corners(p, out[0].v);
 	for (int k = 0; k < ns; k++) {
 		int anchored = segs[k].large;
 		for (int e = 0; e < 2 && anchored; e++) {
@@ -315,8 +302,8 @@ static int is_parallelogram(const piece *pc, double tol)
 
 /*
  * Store q's edges e1, e2 from origin o and check them as the scene builder
- * checks an input triangle (scene.c, make_triangle): no sliver, and the
- * float edges must still give the normal n.
+ * checks an input triangle: no sliver (SLIVER_REL), and the float edges
+ * must still give the normal n (rad_poly_check_stored).
  */
 static int set_edges(rad_poly *q, v3 o, v3 e1, v3 e2, int quad, v3 n)
 {
@@ -325,11 +312,10 @@ static int set_edges(rad_poly *q, v3 o, v3 e1, v3 e2, int quad, v3 n)
 	v3_store_f(q->p0, o);
 	v3_store_f(q->e1, e1);
 	v3_store_f(q->e2, e2);
-	v3 cf = v3_cross(v3_f(q->e1), v3_f(q->e2));
 	q->area = (float)area;
 	q->quad = (uint8_t)quad;
-	return area > SLIVER_REL * lmax2 && q->area > 0 &&
-	       v3_dot(cf, n) > FLOAT_NORMAL_COS * v3_len(cf);
+	return area > SLIVER_REL * lmax2 &&
+	       rad_poly_check_stored(q, area, n) == RAD_POLY_OK;
 }
 
 /* Store piece pc of polygon p (its material, node, normal) at out:

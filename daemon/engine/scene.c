@@ -192,6 +192,18 @@ rad_status rad_scene_add_node(rad_scene *s, const char *name, uint32_t *id,
 
 enum tri_verdict { TRI_OK, TRI_NONFINITE, TRI_DEGENERATE };
 
+enum rad_poly_verdict rad_poly_check_stored(const rad_poly *p, double area,
+                                            v3 n)
+{
+	v3 cf = v3_cross(v3_f(p->e1), v3_f(p->e2));
+	double lf = v3_len(cf);
+	if (!isfinite((float)area) || !isfinite(lf))
+		return RAD_POLY_NONFINITE;
+	if ((float)area == 0.0f || !(v3_dot(cf, n) > FLOAT_NORMAL_COS * lf))
+		return RAD_POLY_DEGENERATE;
+	return RAD_POLY_OK;
+}
+
 /*
  * Turn one input triangle into a stored polygon and its staged vertices.
  * Coordinates beyond float range count as non-finite: they would be
@@ -223,12 +235,14 @@ static enum tri_verdict make_triangle(const double *xyz, rad_poly *p,
 	v3_store_f(p->e1, e1);
 	v3_store_f(p->e2, e2);
 	v3 n = v3_scale(c, 0.5 / area);
-	v3 cf = v3_cross(v3_f(p->e1), v3_f(p->e2));
-	double lf = v3_len(cf);
-	if (!isfinite((float)area) || !isfinite(lf))
+	switch (rad_poly_check_stored(p, area, n)) {
+	case RAD_POLY_NONFINITE:
 		return TRI_NONFINITE;
-	if ((float)area == 0.0f || !(v3_dot(cf, n) > FLOAT_NORMAL_COS * lf))
+	case RAD_POLY_DEGENERATE:
 		return TRI_DEGENERATE;
+	case RAD_POLY_OK:
+		break;
+	}
 	v3_store_f(p->n, n);
 	p->area = (float)area;
 	p->quad = 0;
@@ -638,12 +652,10 @@ static void compute_bounds(rad_scene *s)
 		s->hi[i] = -INFINITY;
 	}
 	for (uint32_t i = 0; i < s->npolys; i++) {
-		const rad_poly *p = &s->polys[i];
-		grow_bounds(s, rad_poly_point(p, 0, 0));
-		grow_bounds(s, rad_poly_point(p, 1, 0));
-		grow_bounds(s, rad_poly_point(p, 0, 1));
-		if (p->quad)
-			grow_bounds(s, rad_poly_point(p, 1, 1));
+		v3 v[4];
+		int nv = rad_poly_corners(&s->polys[i], v);
+		for (int k = 0; k < nv; k++)
+			grow_bounds(s, v[k]);
 	}
 	for (uint32_t i = 0; i < s->nlights; i++)
 		if (s->lights[i].kind != RAD_LIGHT_DIRECTIONAL)

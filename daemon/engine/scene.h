@@ -80,6 +80,18 @@ struct rad_scene {
 	rad_vis *vis; /* BVH over the polygons, after commit */
 };
 
+/* What became of a polygon's stored shape (rad_poly_check_stored). */
+enum rad_poly_verdict { RAD_POLY_OK, RAD_POLY_NONFINITE, RAD_POLY_DEGENERATE };
+
+/*
+ * Check the float edges stored in p against the exact area and unit
+ * normal n they were made from: finite, not rounded to zero area, and
+ * still giving n (FLOAT_NORMAL_COS).  Input triangles and the pieces of
+ * cut polygons are both held to it.
+ */
+enum rad_poly_verdict rad_poly_check_stored(const rad_poly *p, double area,
+                                            v3 n);
+
 /* Shrink the polygon array to its count (the memory merging or cutting
  * freed goes back). */
 void rad_scene_fit_polys(rad_scene *s);
@@ -92,6 +104,21 @@ rad_status rad_scene_conform(rad_scene *s, rad_error *err);
 static inline v3 rad_poly_point(const rad_poly *p, double s, double t)
 {
 	return v3_madd(v3_madd(v3_f(p->p0), v3_f(p->e1), s), v3_f(p->e2), t);
+}
+
+/* A polygon's corners, counter-clockwise seen from its front; returns
+ * their count (3 or 4). */
+static inline int rad_poly_corners(const rad_poly *p, v3 v[4])
+{
+	v[0] = rad_poly_point(p, 0, 0);
+	v[1] = rad_poly_point(p, 1, 0);
+	if (!p->quad) {
+		v[2] = rad_poly_point(p, 0, 1);
+		return 3;
+	}
+	v[2] = rad_poly_point(p, 1, 1);
+	v[3] = rad_poly_point(p, 0, 1);
+	return 4;
 }
 
 #endif
