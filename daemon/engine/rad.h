@@ -216,9 +216,10 @@ typedef struct rad_options {
 	/*
 	 * Receiver accuracy: a link is pushed to smaller receivers while the
 	 * irradiance it brings varies over its receiver by more than this
-	 * fraction of the scene's mean radiosity.  Smaller is more accurate
-	 * near corners and shadow edges, and finer.  hr and rmb (rmb applies
-	 * it to each iteration's increment).
+	 * fraction of the scene's mean radiosity (hr: of the receiver's own
+	 * irradiance where that is less, down to half).  Smaller is more
+	 * accurate near corners and shadow edges, and finer.  hr and rmb (rmb
+	 * applies it to each iteration's increment).
 	 */
 	double variation;
 	/* Smallest element, as a fraction of the scene's bounding-box
