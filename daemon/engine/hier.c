@@ -238,8 +238,12 @@ static rad_status build_cluster(rad_hier *h, uint32_t c, rad_error *err)
 
 double rad_hier_cover_dist(const rad_hier *h, uint32_t poly)
 {
-	return fmin(0.05 * rad_elem_edge(rad_elem_at(h, poly)),
-	            1e-3 * h->scene->diag);
+	const rad_scene *s = h->scene;
+	double edge = rad_elem_edge(rad_elem_at(h, poly));
+	const float *e = s->mats[s->polys[poly].mat].emit;
+	if (e[0] > 0 || e[1] > 0 || e[2] > 0)
+		return fmin(0.05 * edge, 1e-3 * s->diag);
+	return fmin(0.15 * edge, 5e-3 * s->diag);
 }
 
 /* Measure e's exposed fraction on COVER_SAMPLES points (vis: the BVH). */

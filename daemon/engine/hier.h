@@ -218,8 +218,24 @@ static inline double rad_elem_exposed(const rad_elem *e)
 int rad_elem_keep_exposed(const rad_hier *h, uint32_t id, v3 *pts, v3 *nrm,
                           int n, uint64_t *rays);
 
-/* How close something in front of polygon poly must be to cover it:
- * 1/20 of its longest edge, at most 1/1000 of the scene's diagonal. */
+/*
+ * How close something in front of polygon poly must be to cover it:
+ * 15 % of its longest edge, at most 1/200 of the scene's diagonal; for an
+ * emitter 1/20 of its edge, at most 1/1000 of the diagonal.  A surface a
+ * few centimetres under a board or the facing inner side of a slab is a
+ * dark slot: light reaches it only at grazing angles, yet light pushed to
+ * its polygon from above lit it, and two such faces then lit each other
+ * (a Graz desk's inner faces, 3.3 cm apart, reached 100-140 lx where
+ * luxrad-reference finds none).  Measured against luxrad-reference at the
+ * defaults, hr, from 1/20 and 1/1000 for every surface: the Graz office's
+ * worst point -19.5 -> -13.0 %, mean 2.87 -> 2.58 %; the hospital room
+ * 7.48 -> 7.38 %; every scene of our own unchanged.  Emitters keep the
+ * short reach: a luminaire's louvres a few centimetres in front of its
+ * lamp do not cover it (at 1/100 of the diagonal the Graz office's
+ * luminaires went dark, mean error 31 %).  Longer is not better for the
+ * others either: 1/100 of the diagonal read one Graz point +16 %
+ * (1/333 .. 1/133: worst -13.7 .. -12.4 %, mean 2.55 .. 2.64 %).
+ */
 double rad_hier_cover_dist(const rad_hier *h, uint32_t poly);
 
 /*
