@@ -128,8 +128,8 @@ static void hold_room(const char *scene, const char *points,
 static void test_graz_office(void **state)
 {
 	(void)state;
-	static const level lv[] = {{RAD_SOLVER_HR, 0.035, 0.22},
-	                           {RAD_SOLVER_RMB, 0.12, 0.66}};
+	static const level lv[] = {{RAD_SOLVER_HR, 0.032, 0.16},
+	                           {RAD_SOLVER_RMB, 0.105, 0.66}};
 	hold_room("graz.gltf", "graz.points", lv, 2);
 }
 
