@@ -363,9 +363,8 @@ rad_status rad_scene_conform(rad_scene *s, rad_error *err)
 	                           MAX_PIECES * sizeof(piece));
 	seg *segs =
 	        rad_mem_alloc(&s->mem, RAD_MEM_SCRATCH, MAX_SEGS * sizeof(seg));
-	/* Each piece gives at most MAX_VERTS - 2 triangles. */
-	size_t cap = (size_t)s->npolys +
-	             (size_t)nlarge * MAX_PIECES * (MAX_VERTS - 2);
+	/* Room for every polygon once; a cut one grows it below. */
+	size_t cap = (size_t)s->npolys + nlarge;
 	rad_poly *polys =
 	        rad_mem_alloc(&s->mem, RAD_MEM_GEOMETRY, cap * sizeof(*polys));
 	if (!boxes || !pcs || !segs || !polys) {
@@ -389,6 +388,22 @@ rad_status rad_scene_conform(rad_scene *s, rad_error *err)
 			polys[n++] = *p;
 			continue;
 		}
+		/* Each piece gives at most MAX_VERTS - 2 triangles; the
+		 * polygons after i keep their room. */
+		size_t need =
+		        n + (size_t)np * (MAX_VERTS - 2) + (s->npolys - i - 1);
+		rad_poly *grown = rad_mem_grow(&s->mem, RAD_MEM_GEOMETRY, polys,
+		                               &cap, need, sizeof(*polys), cap);
+		if (!grown) {
+			rad_mem_free(&s->mem, RAD_MEM_SCRATCH, segs);
+			rad_mem_free(&s->mem, RAD_MEM_SCRATCH, boxes);
+			rad_mem_free(&s->mem, RAD_MEM_SCRATCH, pcs);
+			rad_mem_free(&s->mem, RAD_MEM_GEOMETRY, polys);
+			return rad_fail(
+			        err, RAD_ERR_NOMEM,
+			        "commit: out of memory cutting polygon %u", i);
+		}
+		polys = grown;
 		uint32_t made = 0;
 		for (int k = 0; k < np && made != UINT32_MAX; k++) {
 			int m = emit_piece(p, &pcs[k], tol, polys + n + made);
