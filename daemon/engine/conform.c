@@ -367,19 +367,11 @@ rad_status rad_scene_conform(rad_scene *s, rad_error *err)
 	size_t cap = (size_t)s->npolys + nlarge;
 	rad_poly *polys =
 	        rad_mem_alloc(&s->mem, RAD_MEM_GEOMETRY, cap * sizeof(*polys));
-	if (!boxes || !pcs || !segs || !polys) {
-		rad_mem_free(&s->mem, RAD_MEM_SCRATCH, segs);
-		rad_mem_free(&s->mem, RAD_MEM_SCRATCH, boxes);
-		rad_mem_free(&s->mem, RAD_MEM_SCRATCH, pcs);
-		rad_mem_free(&s->mem, RAD_MEM_GEOMETRY, polys);
-		return rad_fail(err, RAD_ERR_NOMEM,
-		                "commit: out of memory cutting %u polygons",
-		                nlarge);
-	}
-	for (uint32_t i = 0; i < s->npolys; i++)
+	uint32_t n = 0, cut = 0;
+	int ok = boxes && pcs && segs && polys;
+	for (uint32_t i = 0; ok && i < s->npolys; i++)
 		poly_box(&s->polys[i], tol, boxes + 6 * (size_t)i);
-	uint32_t n = 0;
-	for (uint32_t i = 0; i < s->npolys; i++) {
+	for (uint32_t i = 0; ok && i < s->npolys; i++) {
 		const rad_poly *p = &s->polys[i];
 		int np = p->area >= large ? cut_polygon(s, i, boxes, large, tol,
 		                                        jtol, pcs, segs)
@@ -395,13 +387,8 @@ rad_status rad_scene_conform(rad_scene *s, rad_error *err)
 		rad_poly *grown = rad_mem_grow(&s->mem, RAD_MEM_GEOMETRY, polys,
 		                               &cap, need, sizeof(*polys), cap);
 		if (!grown) {
-			rad_mem_free(&s->mem, RAD_MEM_SCRATCH, segs);
-			rad_mem_free(&s->mem, RAD_MEM_SCRATCH, boxes);
-			rad_mem_free(&s->mem, RAD_MEM_SCRATCH, pcs);
-			rad_mem_free(&s->mem, RAD_MEM_GEOMETRY, polys);
-			return rad_fail(
-			        err, RAD_ERR_NOMEM,
-			        "commit: out of memory cutting polygon %u", i);
+			ok = 0;
+			break;
 		}
 		polys = grown;
 		uint32_t made = 0;
@@ -414,14 +401,21 @@ rad_status rad_scene_conform(rad_scene *s, rad_error *err)
 			continue;
 		}
 		n += made;
-		s->counts.polygons_cut++;
+		cut++;
 	}
 	rad_mem_free(&s->mem, RAD_MEM_SCRATCH, segs);
 	rad_mem_free(&s->mem, RAD_MEM_SCRATCH, boxes);
 	rad_mem_free(&s->mem, RAD_MEM_SCRATCH, pcs);
+	if (!ok) { /* the scene is as it was: commit may be retried */
+		rad_mem_free(&s->mem, RAD_MEM_GEOMETRY, polys);
+		return rad_fail(err, RAD_ERR_NOMEM,
+		                "commit: out of memory cutting %u polygons",
+		                nlarge);
+	}
 	rad_mem_free(&s->mem, RAD_MEM_GEOMETRY, s->polys);
 	s->polys = polys;
 	s->npolys = s->cap_polys = n;
+	s->counts.polygons_cut += cut;
 	rad_scene_fit_polys(s);
 	return RAD_OK;
 }

@@ -240,8 +240,7 @@ double rad_hier_cover_dist(const rad_hier *h, uint32_t poly)
 {
 	const rad_scene *s = h->scene;
 	double edge = rad_elem_edge(rad_elem_at(h, poly));
-	const float *e = s->mats[s->polys[poly].mat].emit;
-	if (e[0] > 0 || e[1] > 0 || e[2] > 0)
+	if (rad_material_emits(&s->mats[s->polys[poly].mat]))
 		return fmin(0.05 * edge, 1e-3 * s->diag);
 	return fmin(0.15 * edge, 5e-3 * s->diag);
 }

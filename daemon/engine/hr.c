@@ -464,8 +464,7 @@ static rad_status retest_list(rad_solver *sv, hr_state *st, uint32_t *head,
 static double local_limit(const rad_solver *sv, uint32_t id)
 {
 	double lim = spread_limit(sv);
-	const float *I = rad_elem_at(&sv->h, id)->I;
-	double i = RAD_LUMA_R * I[0] + RAD_LUMA_G * I[1] + RAD_LUMA_B * I[2];
+	double i = rad_luma(rad_elem_at(&sv->h, id)->I);
 	return fmin(lim, fmax(LOCAL_FLOOR * lim, sv->opt.variation * i));
 }
 

@@ -190,8 +190,6 @@ rad_status rad_scene_add_node(rad_scene *s, const char *name, uint32_t *id,
 
 /* ------------------------------------------------------------- triangles */
 
-enum tri_verdict { TRI_OK, TRI_NONFINITE, TRI_DEGENERATE };
-
 enum rad_poly_verdict rad_poly_check_stored(const rad_poly *p, double area,
                                             v3 n)
 {
@@ -209,8 +207,8 @@ enum rad_poly_verdict rad_poly_check_stored(const rad_poly *p, double area,
  * Coordinates beyond float range count as non-finite: they would be
  * infinite once stored.
  */
-static enum tri_verdict make_triangle(const double *xyz, rad_poly *p,
-                                      float stage[9])
+static enum rad_poly_verdict make_triangle(const double *xyz, rad_poly *p,
+                                           float stage[9])
 {
 	v3 v[3];
 	for (int k = 0; k < 3; k++) {
@@ -218,7 +216,7 @@ static enum tri_verdict make_triangle(const double *xyz, rad_poly *p,
 		for (int c = 0; c < 3; c++) {
 			double x = xyz[3 * k + c];
 			if (!(fabs(x) <= FLT_MAX))
-				return TRI_NONFINITE;
+				return RAD_POLY_NONFINITE;
 			/* + 0.0f turns -0 into +0 for exact edge keys. */
 			stage[3 * k + c] = (float)x + 0.0f;
 		}
@@ -230,23 +228,18 @@ static enum tri_verdict make_triangle(const double *xyz, rad_poly *p,
 	v3 c = v3_cross(e1, e2);
 	double area = 0.5 * v3_len(c);
 	if (!(area > SLIVER_REL * lmax2))
-		return TRI_DEGENERATE;
+		return RAD_POLY_DEGENERATE;
 	v3_store_f(p->p0, v[0]);
 	v3_store_f(p->e1, e1);
 	v3_store_f(p->e2, e2);
 	v3 n = v3_scale(c, 0.5 / area);
-	switch (rad_poly_check_stored(p, area, n)) {
-	case RAD_POLY_NONFINITE:
-		return TRI_NONFINITE;
-	case RAD_POLY_DEGENERATE:
-		return TRI_DEGENERATE;
-	case RAD_POLY_OK:
-		break;
-	}
+	enum rad_poly_verdict verdict = rad_poly_check_stored(p, area, n);
+	if (verdict != RAD_POLY_OK)
+		return verdict;
 	v3_store_f(p->n, n);
 	p->area = (float)area;
 	p->quad = 0;
-	return TRI_OK;
+	return RAD_POLY_OK;
 }
 
 /* Room for ntri more polygons; the stage array always has the capacity of
@@ -303,13 +296,13 @@ rad_status rad_scene_add_triangles(rad_scene *s, uint32_t material,
 		float *stage = s->stage + (size_t)9 * s->npolys;
 		s->counts.triangles_in++;
 		switch (make_triangle(xyz + 9 * i, p, stage)) {
-		case TRI_NONFINITE:
+		case RAD_POLY_NONFINITE:
 			s->counts.triangles_nonfinite++;
 			continue;
-		case TRI_DEGENERATE:
+		case RAD_POLY_DEGENERATE:
 			s->counts.triangles_degenerate++;
 			continue;
-		case TRI_OK:
+		case RAD_POLY_OK:
 			break;
 		}
 		p->mat = material;
@@ -706,8 +699,7 @@ static void compute_totals(rad_scene *s)
 		const rad_material *m = &s->mats[p->mat];
 		s->total_area += p->area;
 		s->counts.quads += p->quad;
-		if (m->emit[0] > 0 || m->emit[1] > 0 || m->emit[2] > 0)
-			s->counts.emitters++;
+		s->counts.emitters += rad_material_emits(m);
 		for (int c = 0; c < 3; c++)
 			s->total_flux[c] += (double)p->area * m->emit[c];
 	}

@@ -31,6 +31,12 @@ typedef struct rad_material {
 	float emit[3]; /* exitance per channel, lux (pi x luminance) */
 } rad_material;
 
+/* 1 if material m emits in some channel. */
+static inline int rad_material_emits(const rad_material *m)
+{
+	return m->emit[0] > 0 || m->emit[1] > 0 || m->emit[2] > 0;
+}
+
 typedef struct rad_poly {
 	float p0[3], e1[3], e2[3]; /* origin and edges (see above) */
 	float n[3];                /* unit normal, front side */
