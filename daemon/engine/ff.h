@@ -76,10 +76,25 @@ double rad_ff_patch(const rad_vis *vis, const rad_patch *r, const rad_patch *s,
  * seeing the source uniformly, the refinement oracles' error measure.
  * cover > 0 leaves out the source points that something in front of them
  * closer than cover hides (hier.h, Covered parts); 0 samples all of it.
+ * rcover > 0 does the same for receiver points that see nothing of the
+ * source while others do: the result is then F from the receiver's
+ * exposed part, to be scaled by its exposed fraction.
  */
 double rad_ff_patch_spread(const rad_vis *vis, const rad_patch *r,
                            const rad_patch *s, int nrcv, int nvis, double cover,
-                           uint64_t *rays, double *spread);
+                           double rcover, uint64_t *rays, double *spread);
+
+/*
+ * The receiver integral from the values f[] at n points xs of a surface
+ * of unit normal nr: their mean, and their spread (max - min) in *spread
+ * (may be NULL).  With rcover > 0, a point that receives nothing while
+ * another receives something is left out when something in front of it
+ * closer than rcover covers it (hier.h, Covered parts; one ray, counted
+ * in *rays): the mean is then over the receiver's exposed part, and the
+ * caller scales it by the exposed fraction.
+ */
+double rad_ff_rcv_mean(const rad_vis *vis, v3 nr, const v3 *xs, const double *f,
+                       int n, double rcover, uint64_t *rays, double *spread);
 
 /*
  * Irradiance (lux per unit intensity, scalar geometry factor) that light L
@@ -93,10 +108,11 @@ double rad_light_point(const rad_vis *vis, const rad_light *L, v3 x, v3 nx,
 double rad_light_patch(const rad_vis *vis, const rad_light *L,
                        const rad_patch *r, int nrcv, uint64_t *rays);
 
-/* Same, with the spread over the receiver points (see above). */
+/* Same, with the spread over the receiver points and the receiver's
+ * covered points left out as rad_ff_patch_spread does (see above). */
 double rad_light_patch_spread(const rad_vis *vis, const rad_light *L,
-                              const rad_patch *r, int nrcv, uint64_t *rays,
-                              double *spread);
+                              const rad_patch *r, int nrcv, double rcover,
+                              uint64_t *rays, double *spread);
 
 /* Unoccluded estimate of rad_light_patch at the centroid (for oracles). */
 double rad_light_estimate(const rad_light *L, const rad_patch *r);

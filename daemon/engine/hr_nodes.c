@@ -455,6 +455,39 @@ static double ff_light_cluster(const rad_solver *sv, const rad_light *L,
 }
 
 /*
+ * How close a cover must be to a receiver element's points to leave them
+ * out of its integral (ff.h), and the fraction of it that is exposed,
+ * which scales the integral over the rest back to the whole element:
+ * the push hands the power to the exposed children only (hier.h).
+ */
+static double rcv_cover(const rad_hier *h, uint32_t rcv, double *exposed)
+{
+	const rad_elem *e = rad_elem_at(h, rcv);
+	*exposed = rad_elem_exposed(e);
+	return h->scene->vis ? rad_hier_cover_dist(h, e->poly) : 0;
+}
+
+/*
+ * The mean of a receiver's rows (one per sample point).  A surface
+ * receiver (points xs) also gives their spread, leaves its covered points
+ * out (rad_ff_rcv_mean) and scales by its exposed fraction (rcv_cover).
+ */
+static double rcv_rows(const rad_hier *h, uint32_t rcv, const v3 *xs,
+                       const double *rows, int n, uint64_t *rays,
+                       double *spread)
+{
+	if (!xs)
+		return rad_ff_rcv_mean(NULL, v3_make(0, 0, 0), NULL, rows, n, 0,
+		                       NULL, NULL);
+	double ex, cover = rcv_cover(h, rcv, &ex);
+	v3 nr = v3_f(h->scene->polys[rad_elem_at(h, rcv)->poly].n);
+	double f = rad_ff_rcv_mean(h->scene->vis, nr, xs, rows, n, cover, rays,
+	                           spread);
+	*spread *= ex;
+	return ex * f;
+}
+
+/*
  * Pairs involving a cluster: average over receiver points x and source
  * points y of the kernel times visibility.  A surface end brings its
  * cosine (and a source its area), a cluster end its projected area
@@ -474,7 +507,7 @@ static double ff_iso(const rad_solver *sv, uint32_t rcv, uint32_t src,
 	int ms = node_points(h, src, sv->opt.vis_samples, 1, y, ny, rays);
 	int rsurf = !node_is_cluster(rcv), ssurf = !node_is_cluster(src);
 	double as = ssurf ? rad_elem_at(h, src)->area : 0;
-	double acc = 0, lo = INFINITY, hi = 0;
+	double rows[RAD_FF_MAX_SAMPLES];
 	int used = 0;
 	*spread = 0;
 	if (!mr || !ms)
@@ -533,15 +566,12 @@ static double ff_iso(const rad_solver *sv, uint32_t rcv, uint32_t src,
 				                    y[j], &nb))
 					row += share * iso_ff(a, c, d2[j]);
 			}
-			used++;
-			acc += row;
-			lo = fmin(lo, row);
-			hi = fmax(hi, row);
+			x[used] = x[i];
+			rows[used++] = row;
 		}
 	}
-	if (rsurf && used)
-		*spread = hi - lo;
-	return used ? acc / used : 0;
+	return rsurf ? rcv_rows(h, rcv, x, rows, used, rays, spread)
+	             : rcv_rows(h, rcv, NULL, rows, used, rays, NULL);
 }
 
 double node_ff(const rad_solver *sv, uint32_t rcv, uint32_t src, uint64_t *rays,
@@ -549,6 +579,7 @@ double node_ff(const rad_solver *sv, uint32_t rcv, uint32_t src, uint64_t *rays,
 {
 	const rad_hier *h = &sv->h;
 	rad_patch pr, ps;
+	double ex, f;
 	if (node_is_light(src)) {
 		const rad_light *L = node_light(h, src);
 		if (node_is_cluster(rcv)) {
@@ -556,9 +587,11 @@ double node_ff(const rad_solver *sv, uint32_t rcv, uint32_t src, uint64_t *rays,
 			return ff_light_cluster(sv, L, rcv, rays);
 		}
 		elem_patch(h, rcv, &pr);
-		return rad_light_patch_spread(sv->scene->vis, L, &pr,
-		                              sv->opt.rcv_samples, rays,
-		                              spread);
+		f = rad_light_patch_spread(
+		        sv->scene->vis, L, &pr, sv->opt.rcv_samples,
+		        rcv_cover(h, rcv, &ex), rays, spread);
+		*spread *= ex;
+		return f * ex;
 	}
 	if (node_is_cluster(rcv) || node_is_cluster(src))
 		return ff_iso(sv, rcv, src, rays, spread);
@@ -568,9 +601,11 @@ double node_ff(const rad_solver *sv, uint32_t rcv, uint32_t src, uint64_t *rays,
 	double cover = es->exposed == RAD_EXPOSED_ALL
 	                       ? 0
 	                       : rad_hier_cover_dist(h, es->poly);
-	return rad_ff_patch_spread(sv->scene->vis, &pr, &ps,
-	                           sv->opt.rcv_samples, sv->opt.vis_samples,
-	                           cover, rays, spread);
+	f = rad_ff_patch_spread(sv->scene->vis, &pr, &ps, sv->opt.rcv_samples,
+	                        sv->opt.vis_samples, cover,
+	                        rcv_cover(h, rcv, &ex), rays, spread);
+	*spread *= ex;
+	return f * ex;
 }
 
 /* Axis-aligned bounds of a node, as doubles. */

@@ -386,11 +386,11 @@ static void eval_item(const shot *sh, rcv_item *it)
 		if (src->light != RAD_NONE) {
 			const rad_light *L = &s->lights[src->light];
 			amount = L->intensity;
-			f = rad_light_patch_spread(s->vis, L, &r, nrcv,
+			f = rad_light_patch_spread(s->vis, L, &r, nrcv, 0,
 			                           &it->rays, &spread);
 		} else if (src->poly != e->poly) { /* coplanar: nothing */
 			f = rad_ff_patch_spread(s->vis, &r, &src->geom, nrcv,
-			                        sv->opt.vis_samples, 0,
+			                        sv->opt.vis_samples, 0, 0,
 			                        &it->rays, &spread);
 		} else {
 			continue;
