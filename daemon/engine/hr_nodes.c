@@ -222,6 +222,8 @@ static double light_estimate_cluster(const rad_hier *h, const rad_light *L,
 	return 1.0 / (v3_dot(d, d) + half * half);
 }
 
+static double node_gap2(const rad_hier *h, uint32_t a, uint32_t b);
+
 double node_ff_estimate(const rad_hier *h, uint32_t rcv, uint32_t src)
 {
 	rad_patch pr, ps;
@@ -280,6 +282,16 @@ double node_ff_estimate(const rad_hier *h, uint32_t rcv, uint32_t src)
 		}
 		cosr *= cs;
 	}
+	/* The estimate puts a cluster's area at its centre.  When the boxes
+	 * come closer than half the centres' distance, part of the cluster
+	 * lies nearer than that, where the kernel is larger: take the
+	 * distance as the larger of the gap and half the centres' distance.
+	 * Estimated from the centres alone, a wall cluster meeting a ceiling
+	 * element got a tenth of its transfer and stayed unrefined: in the
+	 * hospital room's corridor, the ceiling's links from clusters within
+	 * half their size carried 0.2 to 0.6 of what a Monte Carlo estimate
+	 * of the same transfer gives. */
+	d2 = fmin(d2, fmax(node_gap2(h, rcv, src), d2 / 4));
 	return iso_ff(as, cosr, d2);
 }
 
@@ -635,6 +647,20 @@ static void node_box(const rad_hier *h, uint32_t t, double lo[3], double hi[3])
 	}
 }
 
+/* Squared distance between the boxes of two surface or cluster nodes
+ * (0 when they touch or overlap). */
+static double node_gap2(const rad_hier *h, uint32_t a, uint32_t b)
+{
+	double al[3], ah[3], bl[3], bh[3], d2 = 0;
+	node_box(h, a, al, ah);
+	node_box(h, b, bl, bh);
+	for (int k = 0; k < 3; k++) {
+		double gap = fmax(0, fmax(bl[k] - ah[k], al[k] - bh[k]));
+		d2 += gap * gap;
+	}
+	return d2;
+}
+
 /*
  * A light's "form factor" is irradiance per unit of intensity: at most
  * 1 / d^2 (lux per cd) from a point or spot at distance d from the
@@ -675,15 +701,9 @@ static int node_boxes_overlap(const rad_hier *h, uint32_t a, uint32_t b)
 
 double node_ff_bound(const rad_hier *h, uint32_t rcv, uint32_t src)
 {
-	double rl[3], rh[3], sl[3], sh[3], d2 = 0;
 	if (node_is_light(src))
 		return light_ff_bound(h, rcv, src);
-	node_box(h, rcv, rl, rh);
-	node_box(h, src, sl, sh);
-	for (int k = 0; k < 3; k++) {
-		double gap = fmax(0, fmax(sl[k] - rh[k], rl[k] - sh[k]));
-		d2 += gap * gap;
-	}
+	double d2 = node_gap2(h, rcv, src);
 	double as = node_is_cluster(src) ? rad_cluster_at(h, src)->area
 	                                 : rad_elem_at(h, src)->area;
 	double f = as / (M_PI * d2);
