@@ -128,16 +128,16 @@ static void hold_room(const char *scene, const char *points,
 static void test_graz_office(void **state)
 {
 	(void)state;
-	static const level lv[] = {{RAD_SOLVER_HR, 0.032, 0.16},
-	                           {RAD_SOLVER_RMB, 0.105, 0.66}};
+	static const level lv[] = {{RAD_SOLVER_HR, 0.031, 0.15},
+	                           {RAD_SOLVER_RMB, 0.098, 0.59}};
 	hold_room("graz.gltf", "graz.points", lv, 2);
 }
 
 static void test_hospital_room(void **state)
 {
 	(void)state;
-	static const level lv[] = {{RAD_SOLVER_HR, 0.08, 0.23},
-	                           {RAD_SOLVER_RMB, 0.155, 0.47}};
+	static const level lv[] = {{RAD_SOLVER_HR, 0.066, 0.21},
+	                           {RAD_SOLVER_RMB, 0.143, 0.43}};
 	hold_room("hospital.gltf", "hospital.points", lv, 2);
 }
 
