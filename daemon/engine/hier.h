@@ -68,6 +68,11 @@
  *     the form factor from its exposed part is the power that part sends
  *     with its own radiosity B / exposed (an emitter's E is the exposed
  *     part's own: node_exposed_emission);
+ *   - as a receiver, a sample point that sees nothing of a source while
+ *     another does is left out when covered, and the mean over the rest
+ *     is scaled by the exposed fraction (rad_ff_rcv_mean): the form
+ *     factor is then that of the exposed part, as the push hands it out,
+ *     whatever share of the few points the cover happens to hold;
  *   - the push hands children shares of the parent's irradiance in
  *     proportion to their exposed fractions (a covered quarter takes none;
  *     the shares keep the power), and a cluster hands its polygons shares
