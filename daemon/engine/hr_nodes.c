@@ -647,18 +647,25 @@ static void node_box(const rad_hier *h, uint32_t t, double lo[3], double hi[3])
 	}
 }
 
-/* Squared distance between the boxes of two surface or cluster nodes
- * (0 when they touch or overlap). */
-static double node_gap2(const rad_hier *h, uint32_t a, uint32_t b)
+/* Squared distance between two boxes (0 when they touch or overlap). */
+static double box_gap2(const double al[3], const double ah[3],
+                       const double bl[3], const double bh[3])
 {
-	double al[3], ah[3], bl[3], bh[3], d2 = 0;
-	node_box(h, a, al, ah);
-	node_box(h, b, bl, bh);
+	double d2 = 0;
 	for (int k = 0; k < 3; k++) {
 		double gap = fmax(0, fmax(bl[k] - ah[k], al[k] - bh[k]));
 		d2 += gap * gap;
 	}
 	return d2;
+}
+
+/* box_gap2 of two surface or cluster nodes. */
+static double node_gap2(const rad_hier *h, uint32_t a, uint32_t b)
+{
+	double al[3], ah[3], bl[3], bh[3];
+	node_box(h, a, al, ah);
+	node_box(h, b, bl, bh);
+	return box_gap2(al, ah, bl, bh);
 }
 
 /*
@@ -671,13 +678,9 @@ static double light_ff_bound(const rad_hier *h, uint32_t rcv, uint32_t src)
 	const rad_light *L = &h->scene->lights[src & ~RAD_TAG_MASK];
 	if (L->kind == RAD_LIGHT_DIRECTIONAL)
 		return 1;
-	double lo[3], hi[3], d2 = 0;
+	double lo[3], hi[3], p[3] = {L->pos[0], L->pos[1], L->pos[2]};
 	node_box(h, rcv, lo, hi);
-	for (int k = 0; k < 3; k++) {
-		double gap =
-		        fmax(0, fmax(lo[k] - L->pos[k], L->pos[k] - hi[k]));
-		d2 += gap * gap;
-	}
+	double d2 = box_gap2(lo, hi, p, p);
 	/* Inside the box: no finite bound; the caller refines. */
 	return d2 > 0 ? 1 / d2 : 1e30;
 }
@@ -693,10 +696,7 @@ static int node_boxes_overlap(const rad_hier *h, uint32_t a, uint32_t b)
 	} else {
 		node_box(h, b, bl, bh);
 	}
-	for (int k = 0; k < 3; k++)
-		if (bl[k] > ah[k] || al[k] > bh[k])
-			return 0;
-	return 1;
+	return box_gap2(al, ah, bl, bh) == 0;
 }
 
 double node_ff_bound(const rad_hier *h, uint32_t rcv, uint32_t src)
