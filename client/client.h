@@ -22,6 +22,7 @@
 #include <stdint.h>
 #include <stdio.h>
 
+#include "rad.h"
 #include "rp.h"
 
 #define LX_VERSION "0.1.0"
@@ -41,8 +42,11 @@ enum {
 };
 
 /*
- * Every option, listed once: id, long name, takes a value, value name,
- * help.  Which command accepts which is said by the command table.
+ * Every option of the client's own, listed once: id, long name, takes a
+ * value, value name, help.  The engine's options (eps, tol, threads...)
+ * follow them, one per row of rad.h's RAD_OPTIONS, under their cli names:
+ * LX_OPT_ENGINE + RAD_OPT_<field>.  Which command accepts which is said
+ * by the command table.
  */
 #define LX_OPTIONS(X)                                                          \
 	X(HELP, "help", 0, NULL, "show help for the command")                  \
@@ -55,30 +59,6 @@ enum {
 	X(SOLVE, "solve", 0, NULL,                                             \
 	  "also create a job and run it to convergence")                       \
 	X(SOLVER, "solver", 1, "S", "hr | rmb | matrix | progressive [hr]")    \
-	X(ACCURACY, "accuracy", 1, "R",                                        \
-	  "target relative error of the lux, sets eps, variation, tol and "    \
-	  "the query tolerance [0.02]")                                        \
-	X(EPS, "eps", 1, "E", "refinement threshold, > 0 [1e-4]")              \
-	X(ORACLE, "oracle", 1, "O", "refinement test: bfa | bf | f [bfa]")     \
-	X(VARIATION, "variation", 1, "V",                                      \
-	  "hr, rmb: receiver accuracy, fraction of mean radiosity [0.5]")      \
-	X(NO_CLUSTERING, "no-clustering", 0, NULL,                             \
-	  "hr, rmb: no volume clusters")                                       \
-	X(MINIMAL_STORE, "minimal-store", 0, NULL,                             \
-	  "rmb: the report's link criterion alone")                            \
-	X(STUDY, "study", 0, NULL, "count re-created links (costs memory)")    \
-	X(MIN_EDGE, "min-edge", 1, "X",                                        \
-	  "smallest element edge, fraction of the diagonal [0.005]")           \
-	X(MESH_EDGE, "mesh-edge", 1, "X",                                      \
-	  "matrix/progressive mesh edge, fraction of the diagonal [0.05]")     \
-	X(RCV_SAMPLES, "rcv-samples", 1, "N",                                  \
-	  "receiver points per form factor, 1..16 [4]")                        \
-	X(VIS_SAMPLES, "vis-samples", 1, "N",                                  \
-	  "shadow rays per receiver point, 1..16 [4]")                         \
-	X(TOL, "tol", 1, "T", "convergence tolerance on the error [1e-3]")     \
-	X(MAX_ITERATIONS, "max-iterations", 1, "N",                            \
-	  "iteration cap when converging [100]")                               \
-	X(THREADS, "threads", 1, "N", "engine threads, 0 = daemon default")    \
 	X(ITERATIONS, "iterations", 1, "N", "run N more iterations")           \
 	X(CONVERGE, "converge", 0, NULL, "run until converged (the default)")  \
 	X(SECONDS, "seconds", 1, "T", "run for a budget of T seconds")         \
@@ -100,10 +80,16 @@ typedef enum lx_opt {
 #define LX_OPT_ENUM_(id, name, arg, meta, help) LX_OPT_##id,
 	LX_OPTIONS(LX_OPT_ENUM_)
 #undef LX_OPT_ENUM_
-	        LX_OPT_COUNT
+	        LX_OPT_ENGINE,
+	LX_OPT_COUNT = LX_OPT_ENGINE + RAD_NOPTIONS
 } lx_opt;
 
+/* Options accepted by a command, as a mask (at most 64 options). */
 #define LX_BIT(o) ((uint64_t)1 << LX_OPT_##o)
+#define LX_ENGINE_OPT(field) (LX_OPT_ENGINE + RAD_OPT_##field)
+#define LX_ENGINE_BIT(field) ((uint64_t)1 << LX_ENGINE_OPT(field))
+#define LX_ENGINE_BITS (((uint64_t)1 << LX_OPT_COUNT) - LX_BIT(ENGINE))
+_Static_assert(LX_OPT_COUNT < 64, "options must fit a command's mask");
 
 /* The connection to the daemon (net.c). */
 typedef struct lx_conn {

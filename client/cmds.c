@@ -11,6 +11,7 @@
  * the daemon may be a newer version.
  */
 #include <errno.h>
+#include <limits.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -46,51 +47,48 @@ int lx_simple_call(lx_ctx *cx, json_t *req, json_t **reply)
 
 /* ------------------------------------------------------------ options */
 
+/*
+ * The engine options given, as job.create's "options" (rad.h's table: the
+ * key, and the JSON type of each).  Values are checked for their type
+ * here, so that nothing unparsable reaches the daemon; the daemon checks
+ * the ranges, against the same table, and names the option.
+ */
 int lx_job_options(lx_ctx *cx, json_t *req)
 {
-	static const struct {
-		lx_opt opt;
-		const char *key;
-		int integer;
-		long long lo, hi;
-	} num[] = {
-	        {LX_OPT_ACCURACY, "accuracy", 0, 0, 0},
-	        {LX_OPT_EPS, "eps", 0, 0, 0},
-	        {LX_OPT_VARIATION, "variation", 0, 0, 0},
-	        {LX_OPT_MIN_EDGE, "min_edge_rel", 0, 0, 0},
-	        {LX_OPT_MESH_EDGE, "mesh_edge_rel", 0, 0, 0},
-	        {LX_OPT_TOL, "tol", 0, 0, 0},
-	        {LX_OPT_RCV_SAMPLES, "rcv_samples", 1, 0, 1000000},
-	        {LX_OPT_VIS_SAMPLES, "vis_samples", 1, 0, 1000000},
-	        {LX_OPT_MAX_ITERATIONS, "max_iterations", 1, 0, 4294967295LL},
-	        {LX_OPT_THREADS, "threads", 1, 0, 1000000},
-	};
 	json_t *o = json_object();
 
-	for (size_t i = 0; i < sizeof num / sizeof num[0]; i++) {
-		double d;
-		long long v;
-		int r = num[i].integer ? lx_opt_int(cx, num[i].opt, num[i].lo,
-		                                    num[i].hi, &v)
-		                       : lx_opt_double(cx, num[i].opt, &d);
+	for (int i = 0; i < RAD_NOPTIONS; i++) {
+		const rad_option_def *d = &rad_option_defs[i];
+		lx_opt opt = (lx_opt)(LX_OPT_ENGINE + i);
+		json_t *v = NULL;
+		double x;
+		long long k;
+		int r = 0;
+
+		if (!cx->given[opt])
+			continue;
+		switch (d->type) {
+		case RAD_OPT_BOOL: /* the flag sets the opposite */
+			v = json_boolean(d->def == 0);
+			break;
+		case RAD_OPT_ENUM:
+			v = json_string(cx->val[opt]);
+			break;
+		case RAD_OPT_INT:
+			r = lx_opt_int(cx, opt, INT_MIN, INT_MAX, &k);
+			v = r == 0 ? json_integer(k) : NULL;
+			break;
+		case RAD_OPT_DOUBLE:
+			r = lx_opt_double(cx, opt, &x);
+			v = r == 0 ? json_real(x) : NULL;
+			break;
+		}
 		if (r < 0) {
 			json_decref(o);
 			return -1;
 		}
-		if (r == 0)
-			json_object_set_new(o, num[i].key,
-			                    num[i].integer ? json_integer(v)
-			                                   : json_real(d));
+		json_object_set_new(o, d->key, v);
 	}
-	if (cx->given[LX_OPT_ORACLE])
-		json_object_set_new(o, "oracle",
-		                    json_string(cx->val[LX_OPT_ORACLE]));
-	if (cx->given[LX_OPT_NO_CLUSTERING])
-		json_object_set_new(o, "clustering", json_false());
-	if (cx->given[LX_OPT_MINIMAL_STORE])
-		json_object_set_new(o, "store", json_string("minimal"));
-	if (cx->given[LX_OPT_STUDY])
-		json_object_set_new(o, "study", json_true());
 	if (cx->given[LX_OPT_SOLVER])
 		json_object_set_new(req, "solver",
 		                    json_string(cx->val[LX_OPT_SOLVER]));
@@ -496,7 +494,7 @@ int lx_cmd_set(lx_ctx *cx)
 
 	if (lx_pos_id(cx, 0, "job", &job) != 0)
 		return LX_EXIT_USAGE;
-	rc = lx_opt_double(cx, LX_OPT_EPS, &eps);
+	rc = lx_opt_double(cx, LX_ENGINE_OPT(eps), &eps);
 	if (rc > 0)
 		return lx_usage_error(cx, "nothing to set: give --eps E");
 	if (rc < 0)

@@ -24,16 +24,18 @@ static const struct {
 #define LX_OPT_ROW_(id, name, arg, meta, help) {name, meta, help, arg},
         LX_OPTIONS(LX_OPT_ROW_)
 #undef LX_OPT_ROW_
+/* from LX_OPT_ENGINE on: the rows of RAD_OPTIONS */
+#define LX_ENGINE_ROW_(field, key, cli, type, def, lo, hi, range, choices,     \
+                       metavar, unit, help)                                    \
+	{cli, RAD_OPT_##type == RAD_OPT_BOOL ? NULL : metavar, help,           \
+	 RAD_OPT_##type != RAD_OPT_BOOL},
+                RAD_OPTIONS(LX_ENGINE_ROW_)
+#undef LX_ENGINE_ROW_
 };
 
 #define GLOBAL_OPTS                                                            \
 	(LX_BIT(HELP) | LX_BIT(JSON) | LX_BIT(CONNECT) | LX_BIT(TOKEN_FILE))
-#define CREATE_OPTS                                                            \
-	(LX_BIT(NAME) | LX_BIT(SOLVER) | LX_BIT(ACCURACY) | LX_BIT(EPS) |      \
-	 LX_BIT(ORACLE) | LX_BIT(VARIATION) | LX_BIT(NO_CLUSTERING) |          \
-	 LX_BIT(MINIMAL_STORE) | LX_BIT(STUDY) | LX_BIT(MIN_EDGE) |            \
-	 LX_BIT(MESH_EDGE) | LX_BIT(RCV_SAMPLES) | LX_BIT(VIS_SAMPLES) |       \
-	 LX_BIT(TOL) | LX_BIT(MAX_ITERATIONS) | LX_BIT(THREADS))
+#define CREATE_OPTS (LX_BIT(NAME) | LX_BIT(SOLVER) | LX_ENGINE_BITS)
 
 typedef struct cmd_def {
 	const char *name;
@@ -116,7 +118,7 @@ static const cmd_def commands[] = {
          "Examples:\n  luxrad resume 4\n"},
         {"cancel", lx_cmd_control, 1, 0, "JOB", "cancel a job (terminal)",
          "Examples:\n  luxrad cancel 4\n"},
-        {"set", lx_cmd_set, 1, LX_BIT(EPS), "JOB --eps E",
+        {"set", lx_cmd_set, 1, LX_ENGINE_BIT(eps), "JOB --eps E",
          "change a job's refinement threshold",
          "Applied before the job's next iteration.\n\nExamples:\n  luxrad "
          "set 4 --eps 5e-4\n"},
@@ -156,9 +158,11 @@ static const cmd_def commands[] = {
 
 /* ------------------------------------------------------------------ help */
 
+/* One option's help line; an engine option's shows the daemon's default
+ * (a job's accuracy moves the ones it sets). */
 static void print_option(lx_opt o)
 {
-	char lhs[64];
+	char lhs[64], def[64] = "", text[512];
 
 	snprintf(lhs, sizeof lhs, "%s--%s", o == LX_OPT_OUTPUT ? "-o, " : "",
 	         opt_table[o].name);
@@ -166,7 +170,13 @@ static void print_option(lx_opt o)
 		size_t n = strlen(lhs);
 		snprintf(lhs + n, sizeof lhs - n, " %s", opt_table[o].meta);
 	}
-	printf("  %-22s %s\n", lhs, opt_table[o].help);
+	if (o >= LX_OPT_ENGINE &&
+	    rad_option_defs[o - LX_OPT_ENGINE].type != RAD_OPT_BOOL)
+		rad_option_default_text(&rad_option_defs[o - LX_OPT_ENGINE],
+		                        def, sizeof def);
+	snprintf(text, sizeof text, "%s%s%s%s", opt_table[o].help,
+	         def[0] ? " [" : "", def, def[0] ? "]" : "");
+	rp_help_row(stdout, lhs, text);
 }
 
 static void print_common(void)

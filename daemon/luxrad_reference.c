@@ -134,12 +134,13 @@ static void print_help(const cli_args *defaults)
 	       "point.\n\nOptions:\n");
 	for (size_t i = 0; i < NOPTIONS; i++) {
 		const cli_option *o = &cli_options[i];
-		char lhs[40], def[64];
+		char lhs[40], def[64], text[512];
 		snprintf(lhs, sizeof(lhs), "--%s%s%s", o->name,
 		         o->metavar ? " " : "", o->metavar ? o->metavar : "");
 		option_default(o, defaults, def, sizeof(def));
-		printf("  %-20s %s%s%s%s\n", lhs, o->help, def[0] ? " [" : "",
-		       def, def[0] ? "]" : "");
+		snprintf(text, sizeof(text), "%s%s%s%s", o->help,
+		         def[0] ? " [" : "", def, def[0] ? "]" : "");
+		rp_help_row(stdout, lhs, text);
 	}
 	printf("\nWithout --samples, paths are added to each point until its "
 	       "standard\nerror is <= %g of its estimate, at most %llu paths "
@@ -170,17 +171,6 @@ static void print_help(const cli_args *defaults)
 
 /* --------------------------------------------------------------- parsing */
 
-static int parse_double(const char *s, double *out)
-{
-	char *end;
-	errno = 0;
-	double v = strtod(s, &end);
-	if (end == s || *end != '\0' || errno == ERANGE || !isfinite(v))
-		return -1;
-	*out = v;
-	return 0;
-}
-
 /* Decimal digits only (strtoull would take "-1" and " 1"). */
 static int parse_u64(const char *s, uint64_t *out)
 {
@@ -195,16 +185,19 @@ static int parse_u64(const char *s, uint64_t *out)
 	return 0;
 }
 
-static int bad_value(const cli_option *o, const char *value, const char *what)
+/* A value refused: the message in msg, the usage exit code. */
+static int bad_value(const cli_option *o, const char *value, const char *what,
+                     char *msg, size_t len)
 {
-	return usage_error("--%s: invalid value '%s' (expected %s in %c%.17g, "
-	                   "%.17g%c)",
-	                   o->name, value, what,
-	                   o->kind == OPT_DOUBLE ? '(' : '[', o->lo, o->hi,
-	                   o->kind == OPT_DOUBLE ? ')' : ']');
+	return rp_cli_fail(
+	        msg, len,
+	        "--%s: invalid value '%s' (expected %s in %c%.17g, %.17g%c)",
+	        o->name, value, what, o->kind == OPT_DOUBLE ? '(' : '[', o->lo,
+	        o->hi, o->kind == OPT_DOUBLE ? ')' : ']');
 }
 
-static int apply_value(const cli_option *o, const char *value, cli_args *a)
+static int apply_value(const cli_option *o, const char *value, cli_args *a,
+                       char *msg, size_t len)
 {
 	char *p = (char *)a + o->off;
 	double v = 0;
@@ -218,18 +211,18 @@ static int apply_value(const cli_option *o, const char *value, cli_args *a)
 		/* Every count fits JSON's (signed) integers. */
 		if (parse_u64(value, &u) != 0 || u > (uint64_t)INT64_MAX ||
 		    (double)u < o->lo || (double)u > o->hi)
-			return bad_value(o, value, "an integer");
+			return bad_value(o, value, "an integer", msg, len);
 		*(uint64_t *)p = u;
 		return 0;
 	case OPT_DOUBLE:
-		if (parse_double(value, &v) != 0 || !(v > o->lo && v < o->hi))
-			return bad_value(o, value, "a number");
+		if (rp_cli_double(value, &v) != 0 || !(v > o->lo && v < o->hi))
+			return bad_value(o, value, "a number", msg, len);
 		*(double *)p = v;
 		return 0;
 	case OPT_INT:
-		if (parse_double(value, &v) != 0 || v != floor(v) ||
+		if (rp_cli_double(value, &v) != 0 || v != floor(v) ||
 		    v < o->lo || v > o->hi)
-			return bad_value(o, value, "an integer");
+			return bad_value(o, value, "an integer", msg, len);
 		*(int *)p = (int)v;
 		return 0;
 	default:
@@ -239,39 +232,33 @@ static int apply_value(const cli_option *o, const char *value, cli_args *a)
 
 static const cli_option *find_option(const char *name, size_t len)
 {
-	for (size_t i = 0; i < NOPTIONS; i++)
-		if (strlen(cli_options[i].name) == len &&
-		    strncmp(cli_options[i].name, name, len) == 0)
-			return &cli_options[i];
-	return NULL;
+	return rp_cli_find(cli_options, NOPTIONS, sizeof(cli_options[0]), name,
+	                   len);
 }
 
-/* One "--name[=value]" at argv[*i]; may consume argv[*i + 1]. */
-static int parse_option(int argc, char **argv, int *i, cli_args *a)
+static int scan_find(void *ud, const char *name, size_t len,
+                     const char **metavar)
 {
-	const char *arg = argv[*i] + 2;
-	const char *eq = strchr(arg, '=');
-	size_t len = eq ? (size_t)(eq - arg) : strlen(arg);
-	const cli_option *o = find_option(arg, len);
-	const char *value = eq ? eq + 1 : NULL;
-
+	const cli_option *o = find_option(name, len);
+	(void)ud;
 	if (!o)
-		return usage_error("unknown option '%s'", argv[*i]);
+		return -1;
+	*metavar = o->metavar;
+	return 0;
+}
+
+static int scan_set(void *ud, const char *name, size_t len, const char *value,
+                    char *msg, size_t msglen)
+{
+	const cli_option *o = find_option(name, len);
+	cli_args *a = ud;
 	if (o->seen_off)
 		*(int *)((char *)a + o->seen_off) = 1;
 	if (!o->metavar) {
-		if (value)
-			return usage_error("--%s takes no value", o->name);
 		*(int *)((char *)a + o->off) = 1;
-		return 0;
+		return o->kind == OPT_HELP ? RP_CLI_HELP : 0;
 	}
-	if (!value) {
-		if (*i + 1 >= argc)
-			return usage_error("--%s needs a value (%s)", o->name,
-			                   o->metavar);
-		value = argv[++*i];
-	}
-	return apply_value(o, value, a);
+	return apply_value(o, value, a, msg, msglen);
 }
 
 static int check_combination(const cli_args *a)
@@ -290,30 +277,12 @@ static int check_combination(const cli_args *a)
 
 static int parse_args(int argc, char **argv, cli_args *a)
 {
-	int only_positional = 0;
-	for (int i = 1; i < argc; i++) {
-		const char *s = argv[i];
-		if (!only_positional && strcmp(s, "--") == 0) {
-			only_positional = 1;
-		} else if (!only_positional && strncmp(s, "--", 2) == 0) {
-			int rc = parse_option(argc, argv, &i, a);
-			if (rc != 0 || a->help)
-				return rc;
-		} else if (!only_positional && s[0] == '-' && s[1] != '\0') {
-			if (strcmp(s, "-h") == 0) {
-				a->help = 1;
-				return 0;
-			}
-			return usage_error("unknown option '%s'", s);
-		} else if (a->scene_path) {
-			return usage_error("more than one scene given ('%s', "
-			                   "'%s')",
-			                   a->scene_path, s);
-		} else {
-			a->scene_path = s;
-		}
-	}
-	return check_combination(a);
+	static const rp_cli_ops ops = {scan_find, scan_set};
+	char msg[512];
+	if (rp_cli_scan(argc, argv, &ops, a, &a->scene_path, &a->help, msg,
+	                sizeof(msg)) != 0)
+		return usage_error("%s", msg);
+	return a->help ? 0 : check_combination(a);
 }
 
 /* ----------------------------------------------------------------- input */

@@ -9,10 +9,10 @@
  * outside acceptance checks call: its options, output keys and exit codes
  * are a stable interface.
  *
- * Options are one declarative table (cli_options below): the parser, the
- * range checks and --help all read it, so an option cannot exist without
- * being documented.  Exit codes: 0 ok, 1 scene / solve / I/O error (the
- * engine's message on stderr), 2 usage (bad option, bad value, malformed
+ * The command line is solve_args.c's; the engine's options and statistics
+ * are written as JSON by engine_json.c, in the shape the daemon uses for
+ * job.info and iteration events.  Exit codes: 0 ok, 1 scene / solve / I/O error
+ * (the engine's message on stderr), 2 usage (bad option, bad value, malformed
  * points file).  In --json mode nothing but the JSON goes to stdout.
  */
 #include <errno.h>
@@ -27,386 +27,12 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include "engine_json.h"
 #include "export.h"
 #include "gltf.h"
 #include "rad.h"
 #include "rp.h"
-
-enum { EXIT_OKAY = 0, EXIT_SOLVE = 1, EXIT_USAGE = 2 };
-
-/*
- * Default convergence: the solve stops when the engine's estimate of the
- * remaining relative error is below the tolerance the accuracy asks for
- * (rad_options.converge_tol: 1e-3 at the default accuracy, 0.1 % of the
- * converged illuminance).  The iteration cap is generous so that scenes
- * with reflectances near 1, which converge slowly, still get there; it
- * only guards against a solver that stalls.
- */
-#define DEFAULT_MAX_ITER 10000u
-
-typedef struct cli_args {
-	const char *scene_path;
-	const char *points_path; /* NULL: no illuminance queries */
-	const char *export_path; /* NULL: no solved-mesh export */
-	rad_options opt;
-	uint32_t iterations; /* > 0: exactly this many steps */
-	double tol;          /* converge mode: error_estimate target */
-	uint32_t max_iter;   /* converge mode: iteration cap */
-	int tol_given;       /* --converge seen (excludes --iterations) */
-	double accuracy;     /* --accuracy: relative target error */
-	int accuracy_given;  /* --accuracy seen */
-	int max_iter_given;  /* --max-iterations seen (ditto) */
-	int json;            /* one JSON object on stdout */
-	int per_iteration;   /* a stats line on stderr after each step */
-	int help;
-} cli_args;
-
-/* How an option's value is parsed and where it is stored. */
-typedef enum opt_kind {
-	OPT_HELP,     /* --help */
-	OPT_FLAG_ON,  /* int field := 1 */
-	OPT_FLAG_OFF, /* int field := 0 */
-	OPT_DOUBLE,   /* double field, finite, within [lo, hi] */
-	OPT_INT,      /* int field, within [lo, hi] */
-	OPT_U32,      /* uint32_t field, within [lo, hi] */
-	OPT_STRING,   /* const char * field */
-	OPT_SOLVER,   /* rad_solver_kind field */
-	OPT_ORACLE,   /* rad_oracle field */
-} opt_kind;
-
-typedef struct cli_option {
-	const char *name;    /* long name without the leading "--" */
-	const char *metavar; /* NULL for flags */
-	opt_kind kind;
-	size_t off;       /* offset of the field in cli_args */
-	size_t seen_off;  /* offset of an int set to 1 when given, or 0 */
-	double lo, hi;    /* accepted range for numbers (inclusive) */
-	int excl;         /* bounds refused: 1 = lo (eps > 0), 2 = hi */
-	const char *help; /* one line; the default is added by --help */
-} cli_option;
-
-#define ARG(field) offsetof(cli_args, field)
-#define OPT(field) offsetof(cli_args, opt.field)
-
-static const cli_option cli_options[] = {
-        {"solver", "NAME", OPT_SOLVER, OPT(solver), 0, 0, 0, 0,
-         "matrix | progressive | hr (hierarchical radiosity) | rmb "
-         "(reduced-memory hr)"},
-        {"accuracy", "R", OPT_DOUBLE, ARG(accuracy), ARG(accuracy_given),
-         RAD_ACCURACY_MIN, RAD_ACCURACY_MAX, 0,
-         "target relative error of the lux reported; sets --eps, "
-         "--variation,\n                         --converge and the query "
-         "tolerance together (they override it)"},
-        {"eps", "X", OPT_DOUBLE, OPT(eps), 0, 0, 1e9, 1,
-         "refinement threshold, > 0; smaller is finer (see --oracle)"},
-        {"iterations", "N", OPT_U32, ARG(iterations), 0, 1, 1e9, 0,
-         "run exactly N iterations (excludes --converge)"},
-        {"converge", "R", OPT_DOUBLE, ARG(tol), ARG(tol_given), 0, 1, 1,
-         "iterate until the estimated relative error <= R"},
-        {"max-iterations", "N", OPT_U32, ARG(max_iter), ARG(max_iter_given), 1,
-         1e9, 0, "iteration cap when converging"},
-        {"threads", "N", OPT_INT, OPT(threads), 0, 0, 256, 0,
-         "worker threads, 0..256; 0 = one per core"},
-        {"points", "FILE", OPT_STRING, ARG(points_path), 0, 0, 0, 0,
-         "query illuminance at the points in FILE"},
-        {"export", "FILE", OPT_STRING, ARG(export_path), 0, 0, 0, 0,
-         "write the solved mesh to FILE (.glb; .gltf for JSON)"},
-        {"json", NULL, OPT_FLAG_ON, ARG(json), 0, 0, 0, 0,
-         "print one JSON object on stdout instead of the report"},
-        {"per-iteration", NULL, OPT_FLAG_ON, ARG(per_iteration), 0, 0, 0, 0,
-         "print statistics to stderr after every iteration"},
-        {"oracle", "NAME", OPT_ORACLE, OPT(oracle), 0, 0, 0, 0,
-         "refinement test: bfa (flux) | bf (exitance) | f (form factor)"},
-        {"no-clustering", NULL, OPT_FLAG_OFF, OPT(clustering), 0, 0, 0, 0,
-         "hr, rmb: no volume clusters (every polygon pair linked)"},
-        {"minimal-store", NULL, OPT_FLAG_ON, OPT(store), 0, 0, 0, 0,
-         "rmb: the report's creation criterion alone (no anticipation)"},
-        {"study", NULL, OPT_FLAG_ON, OPT(study), 0, 0, 0, 0,
-         "count re-created links (memory counted as \"study\")"},
-        {"variation", "X", OPT_DOUBLE, OPT(variation), 0, 0, 1e9, 3,
-         "hr, rmb: receiver accuracy, fraction of the mean radiosity"},
-        {"min-edge", "X", OPT_DOUBLE, OPT(min_edge_rel), 0, 0, 1, 3,
-         "smallest element edge, fraction of the scene diagonal"},
-        {"mesh-edge", "X", OPT_DOUBLE, OPT(mesh_edge_rel), 0, 0, 1, 1,
-         "matrix/progressive mesh edge, fraction of the diagonal"},
-        {"rcv-samples", "N", OPT_INT, OPT(rcv_samples), 0, 1, 16, 0,
-         "receiver points per form factor (1..16)"},
-        {"vis-samples", "N", OPT_INT, OPT(vis_samples), 0, 1, 16, 0,
-         "shadow rays per receiver point (1..16)"},
-        {"help", NULL, OPT_HELP, ARG(help), 0, 0, 0, 0, "show this help"},
-};
-
-#define NOPTIONS (sizeof(cli_options) / sizeof(cli_options[0]))
-
-static const char *const oracle_names[] = {
-        [RAD_ORACLE_BFA] = "bfa",
-        [RAD_ORACLE_F] = "f",
-        [RAD_ORACLE_BF] = "bf",
-};
-
-/* Report a usage error on stderr; returns the usage exit code. */
-static int usage_error(const char *fmt, ...)
-        __attribute__((format(printf, 1, 2)));
-static int usage_error(const char *fmt, ...)
-{
-	va_list ap;
-	fputs("luxrad-solve: ", stderr);
-	va_start(ap, fmt);
-	vfprintf(stderr, fmt, ap);
-	va_end(ap);
-	fputs("\nTry 'luxrad-solve --help'.\n", stderr);
-	return EXIT_USAGE;
-}
-
-/* ------------------------------------------------------------------ help */
-
-/* The current value of a table option in a, as text for --help. */
-static void option_default(const cli_option *o, const cli_args *a, char *buf,
-                           size_t len)
-{
-	const char *p = (const char *)a + o->off;
-	buf[0] = '\0';
-	switch (o->kind) {
-	case OPT_DOUBLE:
-		snprintf(buf, len, "%g", *(const double *)p);
-		break;
-	case OPT_INT:
-		snprintf(buf, len, "%d", *(const int *)p);
-		break;
-	case OPT_U32: /* 0 = unset (--iterations): nothing to show */
-		if (*(const uint32_t *)p)
-			snprintf(buf, len, "%u", *(const uint32_t *)p);
-		break;
-	case OPT_SOLVER:
-		snprintf(buf, len, "%s",
-		         rad_solver_kind_name(*(const rad_solver_kind *)p));
-		break;
-	case OPT_ORACLE:
-		snprintf(buf, len, "%s", oracle_names[*(const rad_oracle *)p]);
-		break;
-	default:
-		break;
-	}
-}
-
-static void print_help(const cli_args *defaults)
-{
-	printf("Usage: luxrad-solve SCENE [options]\n\n"
-	       "Solve the diffuse interreflection of a glTF 2.0 scene (.gltf "
-	       "or .glb)\nand report illuminance and solver statistics.\n\n"
-	       "Options:\n");
-	for (size_t i = 0; i < NOPTIONS; i++) {
-		const cli_option *o = &cli_options[i];
-		char lhs[40], def[64];
-		snprintf(lhs, sizeof(lhs), "--%s%s%s", o->name,
-		         o->metavar ? " " : "", o->metavar ? o->metavar : "");
-		option_default(o, defaults, def, sizeof(def));
-		printf("  %-22s %s%s%s%s\n", lhs, o->help, def[0] ? " [" : "",
-		       def, def[0] ? "]" : "");
-	}
-	printf("\nWith neither --iterations nor --converge the solve runs "
-	       "until the\nestimated relative error is <= %g (at most %u "
-	       "iterations).\n\n"
-	       "--accuracy R: the lux reported should be within R (relative) "
-	       "of the\ntruth; the default asks for %g.  Each point's "
-	       "estimated error is\nprinted beside it (error_lux in "
-	       "--json).\n\n"
-	       "--eps by oracle: bfa = fraction of the total emitted flux one "
-	       "link may\ncarry; bf = source exitance x form factor, as a "
-	       "fraction of the mean\nemitted exitance (flux / total area); "
-	       "f = form factor alone.\n\n"
-	       "Points file: one point per line, 'x y z nx ny nz': position in "
-	       "metres\nand the normal of the surface the point lies on (any "
-	       "non-zero length);\n'#' starts a comment, blank lines are "
-	       "ignored.\n\n"
-	       "Units: lengths in metres (glTF); illuminance in lux; emissive "
-	       "luminance\nin cd/m2; point and spot intensities in cd; "
-	       "directional lights in lux;\ntimes in seconds; memory in "
-	       "bytes.\n\n"
-	       "Output: a readable report (scene counts, per-iteration table, "
-	       "memory by\nstructure, lux per point), or with --json one "
-	       "object with keys\nilluminance_lux, error_lux, accuracy, "
-	       "query_tolerance, query_seconds,\niterations, seconds, links, "
-	       "elements, clusters, leaves,\nrays, memory_bytes, solver, eps, "
-	       "converged, error_estimate, scene,\nper_iteration.\n\n"
-	       "Exit status: 0 success; 1 scene, solve or I/O error (message "
-	       "on stderr);\n2 usage error (unknown option, bad value, "
-	       "malformed points file).\n",
-	       defaults->tol, DEFAULT_MAX_ITER, RAD_ACCURACY_DEFAULT);
-}
-
-/* --------------------------------------------------------------- parsing */
-
-/* Parse a whole string as a finite double; 0 on success. */
-static int parse_double(const char *s, double *out)
-{
-	char *end;
-	errno = 0;
-	double v = strtod(s, &end);
-	if (end == s || *end != '\0' || errno == ERANGE || !isfinite(v))
-		return -1;
-	*out = v;
-	return 0;
-}
-
-static int in_range(const cli_option *o, double v)
-{
-	if ((o->excl & 1) ? v <= o->lo : v < o->lo)
-		return 0;
-	return (o->excl & 2) ? v < o->hi : v <= o->hi;
-}
-
-/* Store value for option o into a; returns an exit code (0 = ok). */
-static int apply_value(const cli_option *o, const char *value, cli_args *a)
-{
-	char *p = (char *)a + o->off;
-	double v = 0;
-
-	switch (o->kind) {
-	case OPT_STRING:
-		*(const char **)p = value;
-		return 0;
-	case OPT_SOLVER:
-		if (rad_solver_kind_parse(value, (rad_solver_kind *)p) !=
-		    RAD_OK)
-			return usage_error("--%s: unknown solver '%s' (matrix, "
-			                   "progressive or hr)",
-			                   o->name, value);
-		return 0;
-	case OPT_ORACLE:
-		for (size_t i = 0; i < 3; i++) {
-			if (strcmp(value, oracle_names[i]) == 0) {
-				*(rad_oracle *)p = (rad_oracle)i;
-				return 0;
-			}
-		}
-		return usage_error("--%s: unknown oracle '%s' (bfa, bf or f)",
-		                   o->name, value);
-	default:
-		break;
-	}
-	if (parse_double(value, &v) != 0 || !in_range(o, v) ||
-	    (o->kind != OPT_DOUBLE && v != floor(v)))
-		return usage_error("--%s: invalid value '%s' (expected %s in "
-		                   "%c%g, %g%c)",
-		                   o->name, value,
-		                   o->kind == OPT_DOUBLE ? "a number"
-		                                         : "an integer",
-		                   (o->excl & 1) ? '(' : '[', o->lo, o->hi,
-		                   (o->excl & 2) ? ')' : ']');
-	if (o->kind == OPT_DOUBLE)
-		*(double *)p = v;
-	else if (o->kind == OPT_INT)
-		*(int *)p = (int)v;
-	else
-		*(uint32_t *)p = (uint32_t)v;
-	return 0;
-}
-
-static const cli_option *find_option(const char *name, size_t len)
-{
-	for (size_t i = 0; i < NOPTIONS; i++)
-		if (strlen(cli_options[i].name) == len &&
-		    strncmp(cli_options[i].name, name, len) == 0)
-			return &cli_options[i];
-	return NULL;
-}
-
-/* One "--name[=value]" at argv[*i]; may consume argv[*i + 1]. */
-static int parse_option(int argc, char **argv, int *i, cli_args *a)
-{
-	const char *arg = argv[*i] + 2;
-	const char *eq = strchr(arg, '=');
-	size_t len = eq ? (size_t)(eq - arg) : strlen(arg);
-	const cli_option *o = find_option(arg, len);
-	const char *value = eq ? eq + 1 : NULL;
-
-	if (!o)
-		return usage_error("unknown option '%s'", argv[*i]);
-	if (o->seen_off)
-		*(int *)((char *)a + o->seen_off) = 1;
-	if (!o->metavar) {
-		if (value)
-			return usage_error("--%s takes no value", o->name);
-		*(int *)((char *)a + o->off) = o->kind != OPT_FLAG_OFF;
-		return 0;
-	}
-	if (!value) {
-		if (*i + 1 >= argc)
-			return usage_error("--%s needs a value (%s)", o->name,
-			                   o->metavar);
-		value = argv[++*i];
-	}
-	return apply_value(o, value, a);
-}
-
-/* Options that only make sense together, checked after parsing. */
-static int check_combination(const cli_args *a)
-{
-	if (a->iterations && (a->tol_given || a->max_iter_given))
-		return usage_error("--iterations runs a fixed number of steps; "
-		                   "it cannot be combined with %s",
-		                   a->tol_given ? "--converge"
-		                                : "--max-iterations");
-	if (!a->scene_path)
-		return usage_error("no scene file given");
-	return 0;
-}
-
-static int parse_args(int argc, char **argv, cli_args *a)
-{
-	int only_positional = 0;
-	for (int i = 1; i < argc; i++) {
-		const char *s = argv[i];
-		int rc;
-		if (!only_positional && strcmp(s, "--") == 0) {
-			only_positional = 1;
-		} else if (!only_positional && strncmp(s, "--", 2) == 0) {
-			rc = parse_option(argc, argv, &i, a);
-			if (rc != 0 || a->help)
-				return rc;
-		} else if (!only_positional && s[0] == '-' && s[1] != '\0') {
-			if (strcmp(s, "-h") == 0) {
-				a->help = 1;
-				return 0;
-			}
-			return usage_error("unknown option '%s'", s);
-		} else if (a->scene_path) {
-			return usage_error("more than one scene given ('%s', "
-			                   "'%s')",
-			                   a->scene_path, s);
-		} else {
-			a->scene_path = s;
-		}
-	}
-	return check_combination(a);
-}
-
-static void args_default(cli_args *a, double accuracy)
-{
-	memset(a, 0, sizeof(*a));
-	rad_options_default(&a->opt);
-	if (accuracy > 0)
-		rad_options_accuracy(&a->opt, accuracy, NULL);
-	a->accuracy = a->opt.accuracy;
-	a->tol = a->opt.converge_tol;
-	a->max_iter = DEFAULT_MAX_ITER;
-}
-
-/*
- * --accuracy sets several knobs, and an expert knob given beside it wins
- * whatever the order on the command line: parse once to find the
- * accuracy, then again over the defaults it gives.
- */
-static int parse_with_accuracy(int argc, char **argv, cli_args *a)
-{
-	args_default(a, 0);
-	int rc = parse_args(argc, argv, a);
-	if (rc != EXIT_OKAY || a->help || !a->accuracy_given)
-		return rc;
-	args_default(a, a->accuracy);
-	return parse_args(argc, argv, a);
-}
+#include "solve_args.h"
 
 /* ----------------------------------------------------------------- input */
 
@@ -514,12 +140,14 @@ static void print_progress(const rad_stats *st)
 static int run_solver(rad_solver *sv, const cli_args *a, run_log *lg,
                       rad_error *err)
 {
-	uint32_t limit = a->iterations ? a->iterations : a->max_iter;
+	uint32_t limit =
+	        a->iterations ? a->iterations : (uint32_t)a->opt.max_iterations;
 	double t0 = rad_seconds();
 	rad_stats st = {0};
 
 	for (uint32_t i = 0; i < limit; i++) {
-		if (rad_solver_converge(sv, a->tol, 1, err) != RAD_OK)
+		if (rad_solver_converge(sv, a->opt.converge_tol, 1, err) !=
+		    RAD_OK)
 			return -1;
 		rad_solver_stats(sv, &st);
 		if (log_push(lg, &st) != 0) {
@@ -538,71 +166,27 @@ static int run_solver(rad_solver *sv, const cli_args *a, run_log *lg,
 
 /* ---------------------------------------------------------------- output */
 
-/* jansson refuses NaN and infinities: those become null. */
-static json_t *jreal(double v)
-{
-	return isfinite(v) ? json_real(v) : json_null();
-}
-
 static json_t *jint(uint64_t v)
 {
 	return json_integer((json_int_t)v);
 }
 
-static json_t *json_memory(const rad_mem_report *m)
-{
-	json_t *o = json_object();
-	json_object_set_new(o, "total", json_integer(m->total));
-	json_object_set_new(o, "peak_total", json_integer(m->peak_total));
-	json_object_set_new(o, "peak_work", json_integer(m->peak_work));
-	for (int k = 0; k < RAD_MEM_NKINDS; k++)
-		json_object_set_new(o, rad_mem_kind_name((rad_mem_kind)k),
-		                    json_integer(m->bytes[k]));
-	return o;
-}
-
-/*
- * The integer counters written as-is under their field names, one list
- * per struct so that the JSON keys are the names documented in rad.h.
- */
+/* The scene's counters under their field names (rad.h, gltf.h). */
 /* clang-format off */
-#define STATS_COUNTERS(X)                                                      \
-	X(iteration) X(links) X(links_ss) X(links_sc) X(links_cc)              \
-	X(links_light) X(links_active) X(links_passive) X(links_created)       \
-	X(links_deleted) X(links_recreated) X(links_gathered)                  \
-	X(links_transient) X(links_useful) X(elements) X(clusters) X(leaves)   \
-	X(refinements) X(rays)
 #define SCENE_COUNTERS(X)                                                      \
 	X(triangles_in) X(triangles_nonfinite) X(triangles_degenerate)         \
-	X(triangles_duplicate) X(polygons) X(polygons_cut) X(quads) X(materials) X(materials_offered) X(lights)       \
-	X(emitters) X(nodes)
+	X(triangles_duplicate) X(polygons) X(polygons_cut) X(quads)            \
+	X(materials) X(materials_offered) X(lights) X(emitters) X(nodes)
 #define GLTF_COUNTERS(X)                                                       \
 	X(meshes) X(primitives) X(primitives_skipped) X(textures_ignored)      \
 	X(metallic_materials)
 /* clang-format on */
 
-static json_t *json_iteration(const rad_stats *s)
-{
-	json_t *o = json_object();
-#define SET_(f) json_object_set_new(o, #f, jint(s->f));
-	STATS_COUNTERS(SET_)
-#undef SET_
-	json_object_set_new(o, "seconds", jreal(s->seconds));
-	json_object_set_new(o, "residual", jreal(s->residual));
-	json_object_set_new(o, "error_estimate", jreal(s->error_estimate));
-	json_object_set_new(o, "memory_bytes", json_memory(&s->mem));
-	json_t *h = json_array();
-	for (int k = 0; k < RAD_EHIST_BINS; k++)
-		json_array_append_new(h, jint(s->energy_hist[k]));
-	json_object_set_new(o, "energy_hist", h);
-	return o;
-}
-
 static json_t *json_vec3(const double v[3])
 {
 	json_t *a = json_array();
 	for (int i = 0; i < 3; i++)
-		json_array_append_new(a, jreal(v[i]));
+		json_array_append_new(a, ej_real(v[i]));
 	return a;
 }
 
@@ -647,34 +231,23 @@ static int print_json(const report *r)
 	json_t *elux = json_array();
 
 	for (size_t i = 0; i < r->npoints; i++) {
-		json_array_append_new(lux, jreal(r->lux[i]));
-		json_array_append_new(elux, jreal(r->error_lux[i]));
+		json_array_append_new(lux, ej_real(r->lux[i]));
+		json_array_append_new(elux, ej_real(r->error_lux[i]));
 	}
 	for (size_t i = 0; i < r->lg->n; i++)
-		json_array_append_new(its, json_iteration(&r->lg->it[i]));
+		json_array_append_new(its, ej_stats(&r->lg->it[i]));
 	json_object_set_new(o, "illuminance_lux", lux);
 	json_object_set_new(o, "error_lux", elux);
-	json_object_set_new(o, "accuracy", jreal(r->a->opt.accuracy));
-	json_object_set_new(o, "query_tolerance", jreal(r->a->opt.query_tol));
-	json_object_set_new(o, "query_seconds", jreal(r->query_seconds));
 	json_object_set_new(
 	        o, "solver",
 	        json_string(rad_solver_kind_name(r->a->opt.solver)));
-	json_object_set_new(o, "eps", jreal(r->a->opt.eps));
-	json_object_set_new(o, "iterations", jint(s->iteration));
-	json_object_set_new(o, "seconds", jreal(r->lg->solve_seconds));
-	json_object_set_new(o, "load_seconds", jreal(r->lg->load_seconds));
+	json_object_set_new(o, "options", ej_options(&r->a->opt));
+	json_object_set_new(o, "seconds", ej_real(r->lg->solve_seconds));
+	json_object_set_new(o, "load_seconds", ej_real(r->lg->load_seconds));
+	json_object_set_new(o, "query_seconds", ej_real(r->query_seconds));
 	json_object_set_new(o, "converged", json_boolean(r->lg->converged));
-	json_object_set_new(o, "tolerance", jreal(r->a->tol));
-	json_object_set_new(o, "error_estimate", jreal(s->error_estimate));
-	json_object_set_new(o, "links", jint(s->links));
-	json_object_set_new(o, "elements", jint(s->elements));
-	json_object_set_new(o, "clusters", jint(s->clusters));
-	json_object_set_new(o, "leaves", jint(s->leaves));
-	json_object_set_new(o, "rays", jint(r->lg->rays));
-	json_object_set_new(o, "memory_bytes", json_memory(&s->mem));
-	json_object_set_new(o, "memory_peak_bytes",
-	                    json_integer(s->mem.peak_total));
+	json_object_set_new(o, "rays_total", jint(r->lg->rays));
+	json_object_set_new(o, "stats", ej_stats(s));
 	json_object_set_new(o, "scene",
 	                    json_scene(r->scene, r->counts, r->info));
 	json_object_set_new(o, "per_iteration", its);
@@ -730,7 +303,7 @@ static void print_text_iterations(const report *r)
 	       "tolerance %g)\n",
 	       r->lg->converged ? "converged" : "NOT converged",
 	       r->final->iteration, r->lg->solve_seconds,
-	       r->final->error_estimate, r->a->tol);
+	       r->final->error_estimate, r->a->opt.converge_tol);
 	printf("links %llu (ss %llu, sc %llu, cc %llu, light %llu), "
 	       "rays %llu\n",
 	       (unsigned long long)r->final->links,
@@ -958,11 +531,11 @@ int main(int argc, char **argv)
 	rad_gltf_info info = {0};
 	double load_seconds = 0;
 
-	int rc = parse_with_accuracy(argc, argv, &a);
+	int rc = cli_parse(argc, argv, &a);
 	if (rc != EXIT_OKAY)
 		return rc;
 	if (a.help) {
-		print_help(&a);
+		cli_print_help(&a);
 		return EXIT_OKAY;
 	}
 	if (a.points_path)

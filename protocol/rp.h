@@ -34,6 +34,7 @@
 #include <jansson.h>
 #include <stddef.h>
 #include <stdint.h>
+#include <stdio.h>
 
 #ifdef __cplusplus
 extern "C" {
@@ -270,6 +271,46 @@ int rp_addr_is_loopback(const rp_addr *a);
  * line, -1 with a reason in *why.
  */
 int rp_point_line_parse(const char *line, double p[6], const char **why);
+
+/* ---------------------------------------------- command-line tools (rp_cli.c)
+ */
+
+/*
+ * One row of a command-line tool's option table: lhs ("--eps E") in 22
+ * columns, then help wrapped at 79 columns under itself.
+ */
+void rp_help_row(FILE *f, const char *lhs, const char *help);
+
+/*
+ * argv as the tools read it: "--name value", "--name=value", flags, "-h",
+ * "--" (everything after it positional), and one positional argument,
+ * the scene, stored in *scene.  The tool says what its options are:
+ *   find  0 if the name (len bytes, not NUL-terminated) is an option,
+ *         with *metavar its value's name or NULL for a flag
+ *   set   store a value (NULL for a flag)
+ * The callbacks return 0, RP_CLI_USAGE with a message in msg, or
+ * RP_CLI_HELP to stop with *help set (as "-h" does).  rp_cli_scan returns
+ * 0 or RP_CLI_USAGE with the message: an unknown option, a value given to
+ * a flag or missing, a second scene, or what a callback said.
+ */
+enum { RP_CLI_USAGE = 2, RP_CLI_HELP = 3 };
+typedef struct rp_cli_ops {
+	int (*find)(void *ud, const char *name, size_t len,
+	            const char **metavar);
+	int (*set)(void *ud, const char *name, size_t len, const char *value,
+	           char *msg, size_t msglen);
+} rp_cli_ops;
+int rp_cli_scan(int argc, char **argv, const rp_cli_ops *ops, void *ud,
+                const char **scene, int *help, char *msg, size_t len);
+/* Format a usage message into msg; returns RP_CLI_USAGE. */
+int rp_cli_fail(char *msg, size_t len, const char *fmt, ...)
+        __attribute__((format(printf, 3, 4)));
+/* A whole string as a finite double: 0, or -1 (nothing else touched). */
+int rp_cli_double(const char *s, double *out);
+/* The row of a tool's option table (n rows of size bytes, each starting
+ * with its name as a const char *) named name (len bytes); NULL if none. */
+const void *rp_cli_find(const void *rows, size_t n, size_t size,
+                        const char *name, size_t len);
 
 /* Constant-time comparison of two byte strings (lengths may differ). */
 int rp_token_equal(const void *a, size_t alen, const void *b, size_t blen);

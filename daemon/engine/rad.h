@@ -23,6 +23,7 @@
 #ifndef LUXRAD_RAD_H
 #define LUXRAD_RAD_H
 
+#include <math.h>
 #include <stddef.h>
 #include <stdint.h>
 
@@ -204,49 +205,134 @@ typedef enum rad_store {
 	RAD_STORE_MINIMAL,
 } rad_store;
 
+/*
+ * Every tunable option of the engine, declared once.  luxrad-solve's
+ * command line, the protocol's job options and their checks, the client's
+ * help, the daemon's job defaults, PROTOCOL.md's table and the JSON of a
+ * job's effective options are all made from this list; test_options
+ * fails when a document differs from it.
+ *
+ * X(field, key, cli, type, def, lo, hi, range, choices, metavar, unit, help)
+ *   field    the rad_options member
+ *   key      its name in the protocol, the config file and JSON
+ *   cli      the long option of luxrad-solve and luxrad, without "--";
+ *            for a BOOL, the flag that sets the opposite of the default
+ *   type     DOUBLE, INT, BOOL or ENUM (an int indexing `choices`)
+ *   def      the default; for the options `accuracy` sets, the value it
+ *            gives at RAD_ACCURACY_DEFAULT
+ *   lo, hi   accepted range of numbers (hi may be HUGE_VAL)
+ *   range    which ends are excluded: RAD_RANGE_CLOSED, _LO_OPEN,
+ *            _HI_OPEN, _OPEN
+ *   choices  ENUM: a macro listing the names in enum order; else
+ *            RAD_NO_CHOICES
+ *   metavar  the value's name in help text; unit: "" when none
+ *   help     one line
+ *
+ * `accuracy` comes first: it sets eps, variation, query_tol and tol
+ * together (rad_options_accuracy), and any of those given beside it
+ * overrides it whatever the order they were given in.
+ *
+ * What the knobs mean in more words:
+ * - eps.  BFA: fraction of the total emitted flux a link may carry; BF:
+ *   fraction of the mean emitted exitance; F: form factor.
+ * - variation.  A link is pushed to smaller receivers while the
+ *   irradiance it brings varies over its receiver by more than this
+ *   fraction of the scene's mean radiosity (hr: of the receiver's own
+ *   irradiance where that is less, down to half).  Smaller is more
+ *   accurate near corners and shadow edges, and finer.  rmb applies it
+ *   to each iteration's increment.
+ * - min_edge_rel stops refinement at corners; mesh_edge_rel is the
+ *   matrix solver's element and progressive's starting mesh.
+ * - study keeps statistics of re-created links: its memory is counted as
+ *   "study" and left out of mem.peak_work.
+ * - query_tol: the final gather refines visibility, near field and
+ *   far-field cut-offs until its estimated error is below this fraction
+ *   of the answer.
+ * - converge_tol: rad_solver_converge with tol 0 and stats.converged.
+ */
+#define RAD_ACCURACY_DEFAULT 0.02
+#define RAD_ACCURACY_MIN 1e-3
+#define RAD_ACCURACY_MAX 0.5
+/* The query tolerance the default accuracy gives (rad_solution_query). */
+#define RAD_QUERY_TOL_DEFAULT (RAD_ACCURACY_DEFAULT / 2)
+#define RAD_ORACLE_CHOICES "bfa", "f", "bf"
+#define RAD_STORE_CHOICES "anticipate", "minimal"
+#define RAD_NO_CHOICES NULL
+/* clang-format off */
+#define RAD_OPTIONS(X)                                                         \
+	X(accuracy, "accuracy", "accuracy", DOUBLE, RAD_ACCURACY_DEFAULT,      \
+	  RAD_ACCURACY_MIN, RAD_ACCURACY_MAX,                                  \
+	  RAD_RANGE_CLOSED, RAD_NO_CHOICES, "R", "",                           \
+	  "target relative error of the lux reported; sets eps, variation, "   \
+	  "tol and query_tol together (each given beside it overrides it)")    \
+	X(eps, "eps", "eps", DOUBLE, 1e-4, 0, HUGE_VAL, RAD_RANGE_OPEN,        \
+	  RAD_NO_CHOICES, "E", "",                                             \
+	  "refinement threshold; smaller is finer (meaning by oracle)")        \
+	X(oracle, "oracle", "oracle", ENUM, RAD_ORACLE_BFA, 0, 2,              \
+	  RAD_RANGE_CLOSED, RAD_ORACLE_CHOICES, "NAME", "",                    \
+	  "refinement test: bfa (flux), bf (exitance), f (form factor)")       \
+	X(variation, "variation", "variation", DOUBLE, 0.5, 0, HUGE_VAL,       \
+	  RAD_RANGE_OPEN, RAD_NO_CHOICES, "V", "",                             \
+	  "hr, rmb: receiver accuracy, fraction of the mean radiosity")        \
+	X(min_edge_rel, "min_edge_rel", "min-edge", DOUBLE, 5e-3, 0, 1,        \
+	  RAD_RANGE_OPEN, RAD_NO_CHOICES, "X", "",                             \
+	  "smallest element edge, fraction of the scene diagonal")             \
+	X(mesh_edge_rel, "mesh_edge_rel", "mesh-edge", DOUBLE, 0.05, 0, 1,     \
+	  RAD_RANGE_LO_OPEN, RAD_NO_CHOICES, "X", "",                          \
+	  "matrix, progressive: mesh element edge, fraction of the diagonal")  \
+	X(clustering, "clustering", "no-clustering", BOOL, 1, 0, 1,            \
+	  RAD_RANGE_CLOSED, RAD_NO_CHOICES, "BOOL", "",                        \
+	  "hr, rmb: volume clusters (off: every polygon pair linked)")         \
+	X(store, "store", "store", ENUM, RAD_STORE_ANTICIPATE, 0, 1,           \
+	  RAD_RANGE_CLOSED, RAD_STORE_CHOICES, "NAME", "",                     \
+	  "rmb: link creation criterion; minimal = the report's rule alone")   \
+	X(study, "study", "study", BOOL, 0, 0, 1, RAD_RANGE_CLOSED,            \
+	  RAD_NO_CHOICES, "BOOL", "",                                          \
+	  "count re-created links (memory counted as study)")                  \
+	X(threads, "threads", "threads", INT, 0, 0, 256, RAD_RANGE_CLOSED,     \
+	  RAD_NO_CHOICES, "N", "",                                             \
+	  "engine threads; 0 = one per core (luxradd: its solver_threads)")    \
+	X(rcv_samples, "rcv_samples", "rcv-samples", INT, 4, 1, 16,            \
+	  RAD_RANGE_CLOSED, RAD_NO_CHOICES, "N", "",                           \
+	  "receiver points per form factor")                                   \
+	X(vis_samples, "vis_samples", "vis-samples", INT, 4, 1, 16,            \
+	  RAD_RANGE_CLOSED, RAD_NO_CHOICES, "N", "",                           \
+	  "shadow rays per receiver point")                                    \
+	X(query_tol, "query_tol", "query-tol", DOUBLE, 0.01, 0, 1,             \
+	  RAD_RANGE_OPEN, RAD_NO_CHOICES, "T", "",                             \
+	  "relative tolerance of the final gather of illuminance queries")     \
+	X(converge_tol, "tol", "tol", DOUBLE, 1e-3, 0, 1, RAD_RANGE_LO_OPEN,   \
+	  RAD_NO_CHOICES, "T", "",                                             \
+	  "converged when the estimated relative error is at most this")       \
+	X(max_iterations, "max_iterations", "max-iterations", INT, 10000, 1,   \
+	  1e9, RAD_RANGE_CLOSED, RAD_NO_CHOICES, "N", "",                      \
+	  "iteration cap when converging")
+/* clang-format on */
+
+typedef enum rad_opt_type {
+	RAD_OPT_DOUBLE,
+	RAD_OPT_INT,
+	RAD_OPT_BOOL,
+	RAD_OPT_ENUM
+} rad_opt_type;
+
+enum {
+	RAD_RANGE_CLOSED = 0,
+	RAD_RANGE_LO_OPEN = 1,
+	RAD_RANGE_HI_OPEN = 2,
+	RAD_RANGE_OPEN = 3
+};
+
+#define RAD_OPT_CTYPE_DOUBLE double
+#define RAD_OPT_CTYPE_INT int
+#define RAD_OPT_CTYPE_BOOL int
+#define RAD_OPT_CTYPE_ENUM int
+
 typedef struct rad_options {
 	rad_solver_kind solver;
-	rad_oracle oracle;
-	/*
-	 * Refinement threshold.  BFA: fraction of the total emitted flux a
-	 * link may carry; BF: fraction of the mean emitted exitance; F: form
-	 * factor.  Smaller is finer, slower, bigger.
-	 */
-	double eps;
-	/*
-	 * Receiver accuracy: a link is pushed to smaller receivers while the
-	 * irradiance it brings varies over its receiver by more than this
-	 * fraction of the scene's mean radiosity (hr: of the receiver's own
-	 * irradiance where that is less, down to half).  Smaller is more
-	 * accurate near corners and shadow edges, and finer.  hr and rmb (rmb
-	 * applies it to each iteration's increment).
-	 */
-	double variation;
-	/* Smallest element, as a fraction of the scene's bounding-box
-	 * diagonal (edge length).  Stops refinement at corners. */
-	double min_edge_rel;
-	/* Matrix solver (and progressive's starting mesh): element edge,
-	 * as a fraction of the bounding-box diagonal. */
-	double mesh_edge_rel;
-	int clustering;  /* hr, rmb: volume clusters on (default 1) */
-	rad_store store; /* rmb: link creation criterion */
-	/* Study statistics (re-created links): costs memory, counted as
-	 * "study" and left out of mem.peak_work.  Off by default. */
-	int study;
-	/*
-	 * Relative tolerance of illuminance queries: the final gather refines
-	 * visibility, near field and far-field cut-offs until its estimated
-	 * error is below this fraction of the answer.  Set by
-	 * rad_options_accuracy(); > 0.
-	 */
-	double query_tol;
-	/* error_estimate below which the solution counts as converged
-	 * (rad_solver_converge with tol 0, stats.converged). */
-	double converge_tol;
-	double accuracy; /* what rad_options_accuracy() was given */
-	int threads;     /* worker threads; 0 = number of cores */
-	int rcv_samples; /* receiver points per form factor (1..16) */
-	int vis_samples; /* shadow rays per receiver point (1..16) */
+#define RAD_OPT_FIELD_(field, key, cli, type, ...) RAD_OPT_CTYPE_##type field;
+	RAD_OPTIONS(RAD_OPT_FIELD_)
+#undef RAD_OPT_FIELD_
 	/* Called from the stepping thread within long iterations; may be NULL.
 	 */
 	void (*progress)(void *ud, double fraction);
@@ -257,10 +343,59 @@ typedef struct rad_options {
 	const volatile int *cancel;
 } rad_options;
 
+/* One row of RAD_OPTIONS, for code that walks the options. */
+typedef struct rad_option_def {
+	const char *key, *cli;
+	rad_opt_type type;
+	size_t offset; /* of the field in rad_options */
+	double def, lo, hi;
+	int range;                  /* RAD_RANGE_* */
+	const char *const *choices; /* ENUM: names, NULL-terminated */
+	const char *metavar, *unit, *help;
+} rad_option_def;
+
+enum {
+#define RAD_OPT_COUNT_(field, ...) RAD_OPT_##field,
+	RAD_OPTIONS(RAD_OPT_COUNT_)
+#undef RAD_OPT_COUNT_
+	        RAD_NOPTIONS
+};
+
+/* The rows of RAD_OPTIONS in order (RAD_NOPTIONS of them). */
+extern const rad_option_def rad_option_defs[RAD_NOPTIONS];
+
+/* The row whose key (or, for _cli, whose cli name of len bytes) this
+ * is; NULL when none. */
+const rad_option_def *rad_option_find(const char *key);
+const rad_option_def *rad_option_find_cli(const char *cli, size_t len);
+
+/* An option's value as a double (INT, BOOL and ENUM as their int). */
+double rad_option_get(const rad_options *o, const rad_option_def *d);
+
 /*
- * Defaults: rad_options_accuracy(o, RAD_ACCURACY_DEFAULT) on top of the
- * solver-independent settings.
+ * Set an option from a number after checking it: finite, within the
+ * range, whole for INT, 0/1 for BOOL, a choice index for ENUM.
+ * RAD_ERR_INVALID names the key and its range: option "eps" must be > 0
+ * (got -1).
  */
+rad_status rad_option_set(rad_options *o, const rad_option_def *d, double v,
+                          rad_error *err);
+
+/* Index of `name` among an ENUM's choices, -1 if it is none of them. */
+int rad_option_choice(const rad_option_def *d, const char *name);
+
+/* The accepted range as text: "> 0", "in [1, 16]", "in (0, 1)". */
+void rad_option_range_text(const rad_option_def *d, char *buf, size_t len);
+
+/* The default as text: "1e-4" style numbers, "true", or a choice name. */
+void rad_option_default_text(const rad_option_def *d, char *buf, size_t len);
+
+/* Check every option against the table and the solver kind, as
+ * rad_solver_new does. */
+rad_status rad_options_check(const rad_options *o, rad_error *err);
+
+/* Every option at its default (the def column), solver hr, no progress
+ * callback, no cancel flag. */
 void rad_options_default(rad_options *o);
 
 /*
@@ -270,11 +405,6 @@ void rad_options_default(rad_options *o);
  * overridden afterwards.  o->accuracy records the value.
  * RAD_ERR_INVALID unless RAD_ACCURACY_MIN <= accuracy <= RAD_ACCURACY_MAX.
  */
-#define RAD_ACCURACY_DEFAULT 0.02
-#define RAD_ACCURACY_MIN 1e-3
-#define RAD_ACCURACY_MAX 0.5
-/* The query tolerance the default accuracy gives (rad_solution_query). */
-#define RAD_QUERY_TOL_DEFAULT (RAD_ACCURACY_DEFAULT / 2)
 rad_status rad_options_accuracy(rad_options *o, double accuracy,
                                 rad_error *err);
 /* Parse "matrix" / "progressive" / "hr" / "rmb"; RAD_ERR_INVALID if unknown. */
@@ -283,42 +413,90 @@ const char *rad_solver_kind_name(rad_solver_kind k);
 
 #define RAD_EHIST_BINS 16
 
+/*
+ * A solver's statistics, declared once: the struct, the one JSON encoding
+ * (luxrad-solve --json, job.info, iteration events) and the documentation
+ * are made from this list.
+ *
+ * X(field, group, key, type, kind, unit, help)
+ *   group    "" or the JSON object the value sits in ("links")
+ *   key      its name there
+ *   type     U32, U64, DOUBLE, BOOL, HIST (RAD_EHIST_BINS counts) or MEM
+ *   kind     GAUGE (a state: the value now), STEP (what the last
+ *            iteration did), TOTAL (summed over all iterations)
+ */
+/* clang-format off */
+#define RAD_STATS(X)                                                           \
+	X(iteration, "", "iteration", U32, TOTAL, "", "iterations done so far") \
+	X(seconds, "", "seconds", DOUBLE, STEP, "s",                           \
+	  "wall time of the last iteration")                                   \
+	X(seconds_total, "", "seconds_total", DOUBLE, TOTAL, "s",              \
+	  "wall time of all iterations")                                       \
+	X(links, "links", "stored", U64, GAUGE, "", "links stored")            \
+	X(links_ss, "links", "ss", U64, GAUGE, "", "surface to surface")       \
+	X(links_sc, "links", "sc", U64, GAUGE, "", "involving one cluster")    \
+	X(links_cc, "links", "cc", U64, GAUGE, "",                             \
+	  "cluster to cluster (self-links too)")                               \
+	X(links_light, "links", "light", U64, GAUGE, "",                       \
+	  "from point, spot and directional lights")                           \
+	X(links_active, "links", "active", U64, GAUGE, "", "active (leaf) links") \
+	X(links_passive, "links", "passive", U64, GAUGE, "",                   \
+	  "passive links (the hierarchy kept)")                                \
+	X(links_created, "links", "created", U64, STEP, "",                    \
+	  "stored this iteration")                                             \
+	X(links_deleted, "links", "deleted", U64, STEP, "",                    \
+	  "stored before, removed this iteration")                             \
+	X(links_recreated, "links", "recreated", U64, STEP, "",                \
+	  "of created, pairs deleted in an earlier iteration (study only)")    \
+	X(links_gathered, "links", "gathered", U64, STEP, "",                  \
+	  "exchanges carried this iteration")                                  \
+	X(links_transient, "links", "transient", U64, STEP, "",                \
+	  "of gathered, by links never stored")                                \
+	X(links_useful, "links", "useful", U64, STEP, "",                      \
+	  "of gathered, those whose increment fails the oracle one level up")  \
+	X(energy_hist, "", "energy_hist", HIST, STEP, "",                      \
+	  "exchanges by flux fraction: bin k counts [1e-(k+1), 1e-k)")         \
+	X(elements, "", "elements", U64, GAUGE, "", "surface elements")        \
+	X(clusters, "", "clusters", U64, GAUGE, "", "volume clusters")         \
+	X(leaves, "", "leaves", U64, GAUGE, "", "surface leaves (the mesh)")   \
+	X(refinements, "", "refinements", U64, STEP, "",                       \
+	  "element splits this iteration")                                     \
+	X(rays, "", "rays", U64, STEP, "", "shadow rays this iteration")       \
+	X(residual, "", "residual", DOUBLE, STEP, "",                          \
+	  "relative change, or unshot energy")                                 \
+	X(error_estimate, "", "error_estimate", DOUBLE, GAUGE, "",             \
+	  "estimated remaining relative error")                                \
+	X(converged, "", "converged", BOOL, GAUGE, "",                         \
+	  "error_estimate is at most the tolerance")                           \
+	X(mem, "", "memory", MEM, GAUGE, "B", "solver and scene memory")
+/* clang-format on */
+
+#define RAD_STAT_CTYPE_U32 uint32_t
+#define RAD_STAT_CTYPE_U64 uint64_t
+#define RAD_STAT_CTYPE_DOUBLE double
+#define RAD_STAT_CTYPE_BOOL int
+#define RAD_STAT_CTYPE_HIST uint64_t
+#define RAD_STAT_CTYPE_MEM rad_mem_report
+#define RAD_STAT_DIM_U32
+#define RAD_STAT_DIM_U64
+#define RAD_STAT_DIM_DOUBLE
+#define RAD_STAT_DIM_BOOL
+#define RAD_STAT_DIM_HIST [RAD_EHIST_BINS]
+#define RAD_STAT_DIM_MEM
+
+/*
+ * links_useful are the report's "useful" links (§3.2.4): their increment
+ * (this iteration's transfer minus the last one's) would fail the oracle
+ * one level up (4 x its oracle value > eps), so the exchange needs them at
+ * their level.  energy_hist bins the oracle's BFA value (flux as a
+ * fraction of the total source flux); the last bin takes everything
+ * smaller, zero too.
+ */
 typedef struct rad_stats {
-	uint32_t iteration;     /* iterations done so far */
-	double seconds;         /* wall time of the last iteration */
-	double seconds_total;   /* wall time of all iterations */
-	uint64_t links;         /* links stored */
-	uint64_t links_ss;      /* surface -> surface */
-	uint64_t links_sc;      /* involving one cluster */
-	uint64_t links_cc;      /* cluster -> cluster (incl. self-links) */
-	uint64_t links_light;   /* from point/spot/directional lights */
-	uint64_t links_active;  /* active (leaf) links */
-	uint64_t links_passive; /* passive links (hierarchy kept) */
-	uint64_t links_created; /* stored this iteration */
-	uint64_t links_deleted; /* stored before, removed this iteration */
-	/* Of links_created, pairs deleted in an earlier iteration (counted
-	 * only with rad_options.study, else 0). */
-	uint64_t links_recreated;
-	uint64_t links_gathered;  /* exchanges carried this iteration */
-	uint64_t links_transient; /* of those, by links never stored */
-	/* Of links_gathered, those whose increment (this iteration's
-	 * transfer minus the last one's) would fail the oracle one level up
-	 * (4 x its oracle value > eps): the links the exchange needs at
-	 * their level, the report's "useful" links (§3.2.4). */
-	uint64_t links_useful;
-	/* Exchanges by energy carried (the oracle's BFA value: flux as a
-	 * fraction of the total source flux): bin k counts values in
-	 * [10^-(k+1), 10^-k); the last bin everything smaller, zero too. */
-	uint64_t energy_hist[RAD_EHIST_BINS];
-	uint64_t elements; /* surface elements */
-	uint64_t clusters;
-	uint64_t leaves;       /* surface leaves (the mesh) */
-	uint64_t refinements;  /* element splits this iteration */
-	uint64_t rays;         /* shadow rays this iteration */
-	double residual;       /* relative change / unshot energy */
-	double error_estimate; /* estimated remaining relative error */
-	int converged;         /* error_estimate below the tolerance */
-	rad_mem_report mem;    /* solver + scene memory */
+#define RAD_STAT_FIELD_(field, group, key, type, ...)                          \
+	RAD_STAT_CTYPE_##type field RAD_STAT_DIM_##type;
+	RAD_STATS(RAD_STAT_FIELD_)
+#undef RAD_STAT_FIELD_
 } rad_stats;
 
 typedef struct rad_solver rad_solver;
@@ -336,7 +514,7 @@ rad_status rad_solver_new(const rad_scene *scene, const rad_options *opt,
 rad_status rad_solver_step(rad_solver *sv, rad_error *err);
 
 /* Step until error_estimate <= tol (0: opt.converge_tol) or max_iter
- * iterations were done. */
+ * iterations were done (0: opt.max_iterations). */
 rad_status rad_solver_converge(rad_solver *sv, double tol, uint32_t max_iter,
                                rad_error *err);
 

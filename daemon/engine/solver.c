@@ -1,5 +1,5 @@
 /*
- * solver.c -- what all solvers share: options, creation, stepping, timing,
+ * solver.c -- what all solvers share: creation, stepping, timing,
  * statistics and memory reports.  The solvers themselves (matrix.c,
  * progressive.c, hr.c, rmb.c) only implement the ops table of solver.h.
  */
@@ -18,51 +18,6 @@ static const rad_solver_ops *const solver_table[RAD_SOLVER_NKINDS] = {
         [RAD_SOLVER_HR] = &rad_solver_hr_ops,
         [RAD_SOLVER_RMB] = &rad_solver_rmb_ops,
 };
-
-void rad_options_default(rad_options *o)
-{
-	memset(o, 0, sizeof(*o));
-	o->solver = RAD_SOLVER_HR;
-	o->oracle = RAD_ORACLE_BFA;
-	o->min_edge_rel = 5e-3;
-	o->mesh_edge_rel = 0.05;
-	o->clustering = 1;
-	o->threads = 0;
-	o->rcv_samples = 4;
-	o->vis_samples = 4;
-	rad_options_accuracy(o, RAD_ACCURACY_DEFAULT, NULL);
-}
-
-/*
- * What one accuracy R asks of each knob.  The query's gather gets half of
- * the budget; the solution the rest: the convergence tolerance a
- * twentieth (the iteration error is cheap to remove), the link threshold
- * eps (a flux fraction: a link's error is second order in its size) and,
- * for looser R only, the receiver variation in proportion.  At the
- * default R = 0.02 these are the long-standing defaults (eps 1e-4,
- * variation 0.5, convergence 1e-3, query tolerance 1e-2).  A variation
- * finer than 0.5 makes points a few centimetres from a corner (floor and
- * two walls) brighter, not closer (the office's floor corners: +3.4 % at
- * 0.5, +12.7 % at 0.25, against luxrad-reference; README, Limitations),
- * and bought little elsewhere in the validation study (Cornell box,
- * obstructed source, bright hall, closed boxes and room: within 0.4 % at
- * --accuracy 0.01), so a tighter R leaves it at 0.5 until leaves near
- * corners are right.
- */
-rad_status rad_options_accuracy(rad_options *o, double accuracy, rad_error *err)
-{
-	if (!(accuracy >= RAD_ACCURACY_MIN && accuracy <= RAD_ACCURACY_MAX))
-		return rad_fail(err, RAD_ERR_INVALID,
-		                "accuracy must be in [%g, %g] (got %g)",
-		                RAD_ACCURACY_MIN, RAD_ACCURACY_MAX, accuracy);
-	double r = accuracy / RAD_ACCURACY_DEFAULT;
-	o->accuracy = accuracy;
-	o->query_tol = accuracy / 2;
-	o->converge_tol = accuracy / 20;
-	o->eps = 1e-4 * r * r;
-	o->variation = 0.5 * fmax(r, 1.0);
-	return RAD_OK;
-}
 
 rad_status rad_solver_kind_parse(const char *name, rad_solver_kind *out)
 {
@@ -101,63 +56,13 @@ void rad_solver_set_residual(rad_solver *sv, double r)
 	sv->prev_residual = r;
 }
 
-static rad_status check_options(const rad_options *o, rad_error *err)
-{
-	if ((unsigned)o->solver >= RAD_SOLVER_NKINDS)
-		return rad_fail(err, RAD_ERR_INVALID, "unknown solver %d",
-		                (int)o->solver);
-	if ((unsigned)o->oracle > RAD_ORACLE_BF)
-		return rad_fail(err, RAD_ERR_INVALID, "unknown oracle %d",
-		                (int)o->oracle);
-	if ((unsigned)o->store > RAD_STORE_MINIMAL)
-		return rad_fail(err, RAD_ERR_INVALID,
-		                "unknown link creation criterion %d",
-		                (int)o->store);
-	if (!(o->eps > 0) || !isfinite(o->eps))
-		return rad_fail(err, RAD_ERR_INVALID,
-		                "eps must be a finite number > 0 (got %g)",
-		                o->eps);
-	if (!(o->variation > 0) || !isfinite(o->variation))
-		return rad_fail(
-		        err, RAD_ERR_INVALID,
-		        "variation must be a finite number > 0 (got %g)",
-		        o->variation);
-	if (!(o->query_tol > 0 && o->query_tol < 1))
-		return rad_fail(err, RAD_ERR_INVALID,
-		                "query tolerance must be in (0, 1) (got %g)",
-		                o->query_tol);
-	if (!(o->converge_tol > 0) || !isfinite(o->converge_tol))
-		return rad_fail(err, RAD_ERR_INVALID,
-		                "convergence tolerance must be a finite "
-		                "number > 0 (got %g)",
-		                o->converge_tol);
-	if (!(o->min_edge_rel > 0) || !(o->min_edge_rel < 1))
-		return rad_fail(err, RAD_ERR_INVALID,
-		                "min_edge_rel must be in (0, 1) (got %g)",
-		                o->min_edge_rel);
-	if (!(o->mesh_edge_rel > 0) || !(o->mesh_edge_rel <= 1))
-		return rad_fail(err, RAD_ERR_INVALID,
-		                "mesh_edge_rel must be in (0, 1] (got %g)",
-		                o->mesh_edge_rel);
-	if (o->threads < 0 || o->threads > 256)
-		return rad_fail(err, RAD_ERR_INVALID,
-		                "threads must be 0 (all cores) to 256 (got %d)",
-		                o->threads);
-	if (o->rcv_samples < 1 || o->rcv_samples > 16 || o->vis_samples < 1 ||
-	    o->vis_samples > 16)
-		return rad_fail(err, RAD_ERR_INVALID,
-		                "samples must be 1..16 (got rcv %d, vis %d)",
-		                o->rcv_samples, o->vis_samples);
-	return RAD_OK;
-}
-
 rad_status rad_solver_new(const rad_scene *scene, const rad_options *opt,
                           rad_solver **out, rad_error *err)
 {
 	*out = NULL;
 	if (!scene || !scene->committed)
 		return rad_fail(err, RAD_ERR_STATE, "scene is not committed");
-	rad_status st = check_options(opt, err);
+	rad_status st = rad_options_check(opt, err);
 	if (st)
 		return st;
 	/* The struct itself is not counted: it is fixed-size bookkeeping;
@@ -228,6 +133,8 @@ rad_status rad_solver_converge(rad_solver *sv, double tol, uint32_t max_iter,
 		return rad_fail(err, RAD_ERR_INVALID,
 		                "tolerance must be > 0 (got %g)", tol);
 	sv->tol = tol;
+	if (max_iter == 0)
+		max_iter = (uint32_t)sv->opt.max_iterations;
 	for (uint32_t i = 0; i < max_iter; i++) {
 		rad_status st = rad_solver_step(sv, err);
 		if (st)

@@ -34,6 +34,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "engine_json.h"
 #include "log.h"
 #include "server.h"
 
@@ -64,8 +65,6 @@ srv_job *srv_job_alloc(srv *s, srv_scene *sc)
 	j->state = SRV_JOB_PAUSED;
 	j->created = j->updated = srv_now_unix();
 	rad_options_default(&j->opt);
-	j->tol = 1e-3;
-	j->max_iter = 100;
 	return j;
 }
 
@@ -228,7 +227,7 @@ static void publish(srv *s, srv_job *j, int send_event)
 	srv_sol *ns = NULL;
 
 	rad_solver_stats(j->solver, &st);
-	json_t *stats = srv_stats_json(&st);
+	json_t *stats = ej_stats(&st);
 	char *text = json_dumps(stats, JSON_COMPACT | JSON_REAL_PRECISION(17));
 	if (rad_solution_new(j->solver, &rs, &err) == RAD_OK)
 		ns = srv_sol_new(s, rs, j->scene, j->opt.query_tol,
@@ -342,8 +341,9 @@ static job_action next_action(srv *s, srv_job *j, rad_error *err)
 		a = ACT_PAUSE;
 	else if (atomic_load(&s->stopping))
 		a = ACT_SHUTDOWN;
-	else if (!j->replaying && ((j->converged && j->iteration > 0) ||
-	                           j->solver_iter >= j->max_iter))
+	else if (!j->replaying &&
+	         ((j->converged && j->iteration > 0) ||
+	          j->solver_iter >= (uint32_t)j->opt.max_iterations))
 		a = ACT_DONE;
 	else if (!j->replaying && j->target.mode == JOB_MODE_ITERATIONS &&
 	         j->solver_iter >= j->target.until)
@@ -453,7 +453,8 @@ static int replay(srv *s, srv_job *j, job_action *stop, rad_error *err)
 			return -1;
 		if (*stop != ACT_STEP)
 			break;
-		if (rad_solver_converge(j->solver, j->tol, 1, err) != RAD_OK)
+		if (rad_solver_converge(j->solver, j->opt.converge_tol, 1,
+		                        err) != RAD_OK)
 			return -1;
 		j->solver_iter++;
 	}
@@ -535,7 +536,8 @@ static void run_job(srv *s, srv_job *j)
 		if (a != ACT_STEP)
 			break;
 		j->step_t0 = rad_seconds();
-		rad_status st = rad_solver_converge(j->solver, j->tol, 1, &err);
+		rad_status st = rad_solver_converge(
+		        j->solver, j->opt.converge_tol, 1, &err);
 		if (st == RAD_ERR_CANCELLED)
 			continue; /* next_action tells why */
 		if (st != RAD_OK) {

@@ -84,8 +84,6 @@ cmd_result srv_cmd_job_create(srv_req *r)
 	uint64_t scene_id = 0;
 	const char *name = NULL, *solver = NULL;
 	rad_options o;
-	double tol;
-	uint32_t max_iter;
 
 	if (rp_arg_u64(r->hdr, "scene", 1, &scene_id, &r->err) != 0 ||
 	    rp_arg_string(r->hdr, "name", 0, &name, &r->err) < 0 ||
@@ -99,8 +97,7 @@ cmd_result srv_cmd_job_create(srv_req *r)
 		return srv_req_fail(r, RP_ERR_NOT_FOUND, "no scene %llu",
 		                    (unsigned long long)scene_id);
 	if (srv_job_options_parse(s, json_object_get(r->hdr, "options"),
-	                          solver ? solver : "hr", &o, &tol, &max_iter,
-	                          &r->err) != 0)
+	                          solver ? solver : "hr", &o, &r->err) != 0)
 		return CMD_ERROR;
 	if (s->njobs + s->jobs_pending >= s->cfg.max_jobs)
 		return srv_req_fail(r, RP_ERR_LIMIT,
@@ -114,8 +111,6 @@ cmd_result srv_cmd_job_create(srv_req *r)
 		return srv_req_fail(r, RP_ERR_NOMEM, "out of memory");
 	}
 	j->opt = o;
-	j->tol = tol;
-	j->max_iter = max_iter;
 	snprintf(j->name, sizeof(j->name), "%s", name ? name : "");
 	c->job = j;
 	c->t.run = create_run;

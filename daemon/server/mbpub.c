@@ -230,13 +230,12 @@ static double progress_of(const job_snap *js, const mbp_job *p,
 		return clamp01(1 - left / t->seconds);
 	}
 	case JOB_MODE_CONVERGE: {
-		double pi = j->max_iter > 0
-		                    ? (double)js->iter / (double)j->max_iter
-		                    : 0;
+		double tol = j->opt.converge_tol;
+		double pi = (double)js->iter / (double)j->opt.max_iterations;
 		double pe = 0;
-		if (p && p->err_first > j->tol && p->err > 0 && j->tol > 0)
+		if (p && p->err_first > tol && p->err > 0 && tol > 0)
 			pe = log(p->err_first / p->err) /
-			     log(p->err_first / j->tol);
+			     log(p->err_first / tol);
 		return clamp01(pi > pe ? pi : pe);
 	}
 	default:
@@ -262,17 +261,17 @@ static double eta_of(const job_snap *js, const mbp_job *p, const srv_job *j,
 			return js->deadline > now ? js->deadline - now : 0;
 		return t->left_s;
 	case JOB_MODE_CONVERGE: {
-		if (!p || !(p->err > 0) || !(j->tol > 0))
+		double tol = j->opt.converge_tol;
+		double left = (double)j->opt.max_iterations - js->iter;
+		if (!p || !(p->err > 0) || !(tol > 0))
 			return NAN;
-		if (p->err <= j->tol)
+		if (p->err <= tol)
 			return 0;
 		double rho = p->err / p->err_prev;
 		if (!(rho > 0 && rho < 1))
 			return NAN;
-		double k = ceil(log(j->tol / p->err) / log(rho));
-		double cap = j->max_iter > js->iter
-		                     ? (double)(j->max_iter - js->iter)
-		                     : 0;
+		double k = ceil(log(tol / p->err) / log(rho));
+		double cap = left > 0 ? left : 0;
 		return (k < cap ? k : cap) * it;
 	}
 	default:

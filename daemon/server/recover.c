@@ -206,7 +206,7 @@ static void recover_job(srv *s, const srv_job_row *r)
 
 	if (!sc || !j ||
 	    srv_job_options_parse(s, json_object_get(o, "options"), solver,
-	                          &j->opt, &j->tol, &j->max_iter, &e) != 0 ||
+	                          &j->opt, &e) != 0 ||
 	    parse_eps_log(j, r->eps_log_json) != 0) {
 		srv_error("job %llu: not restored: %s",
 		          (unsigned long long)r->id,

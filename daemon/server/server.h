@@ -148,11 +148,9 @@ struct srv_job {
 	srv *srv;
 	uint64_t id;
 	char name[256];
-	srv_scene *scene;  /* ref held */
-	rad_options opt;   /* initial options (threads resolved) */
-	double tol;        /* convergence tolerance */
-	uint32_t max_iter; /* iteration cap */
-	double created;    /* Unix time */
+	srv_scene *scene; /* ref held */
+	rad_options opt;  /* initial options (threads resolved) */
+	double created;   /* Unix time */
 
 	pthread_mutex_t mu; /* guards the group below; short holds only */
 	srv_job_state state;
@@ -216,10 +214,8 @@ int srv_job_terminal(srv_job_state st);
 json_t *srv_target_json(const job_target *t);
 /* Build the rad_options + tol/max from a stored/created options JSON. */
 int srv_job_options_parse(srv *s, json_t *opts, const char *solver,
-                          rad_options *o, double *tol, uint32_t *max_iter,
-                          rp_error *err);
+                          rad_options *o, rp_error *err);
 json_t *srv_job_options_json(const srv_job *j); /* effective options */
-json_t *srv_stats_json(const rad_stats *st);
 /* Solver memory of a job plus its solution (caller holds j->mu). */
 int64_t srv_job_memory_locked(const srv_job *j);
 

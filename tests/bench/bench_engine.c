@@ -21,6 +21,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "engine_json.h"
 #include "gltf.h"
 #include "rad.h"
 #include "vis.h"
@@ -53,7 +54,7 @@ static void usage(FILE *f)
 	           "  --solver NAME   matrix | progressive | hr [hr]\n"
 	           "  --eps X         refinement threshold [engine default]\n"
 	           "  --iterations N  run exactly N iterations [3]\n"
-	           "  --converge R    instead, iterate until error <= R\n"
+	           "  --tol T         instead, iterate until error <= T\n"
 	           "  --json          one JSON object on stdout\n"
 	           "  --help          this text\n"
 	           "Times in seconds, memory in bytes, rays/s = shadow rays of "
@@ -85,11 +86,11 @@ static int apply_option(bench_args *a, const char *o, const char *v)
 	else if (strcmp(o, "--iterations") == 0 && !number(v, 1, 1e6, &x) &&
 	         x == floor(x))
 		a->iterations = (uint32_t)x;
-	else if (strcmp(o, "--converge") == 0 && !number(v, 1e-12, 1, &x))
+	else if (strcmp(o, "--tol") == 0 && !number(v, 1e-12, 1, &x))
 		a->tol = x;
 	else
 		return -1;
-	if (strcmp(o, "--converge") == 0)
+	if (strcmp(o, "--tol") == 0)
 		a->iterations = 0; /* converge mode */
 	return 0;
 }
@@ -177,13 +178,8 @@ static int bench_solve(const bench_args *a, const rad_scene *sc,
 
 static json_t *result_json(const bench_result *r)
 {
-	json_t *o = json_object(), *mem = json_object();
-	const rad_stats *s = &r->st;
+	json_t *o = json_object();
 
-	for (int k = 0; k < RAD_MEM_NKINDS; k++)
-		json_object_set_new(mem, rad_mem_kind_name((rad_mem_kind)k),
-		                    json_integer(s->mem.bytes[k]));
-	json_object_set_new(mem, "total", json_integer(s->mem.total));
 	json_object_set_new(o, "scene", json_string(r->path));
 	json_object_set_new(o, "file_bytes",
 	                    json_integer((json_int_t)r->file_bytes));
@@ -193,22 +189,13 @@ static json_t *result_json(const bench_result *r)
 	json_object_set_new(o, "load_seconds", json_real(r->load_s));
 	json_object_set_new(o, "bvh_seconds", json_real(r->bvh_s));
 	json_object_set_new(o, "bvh_bytes", json_integer(r->bvh_bytes));
-	json_object_set_new(o, "iterations", json_integer(s->iteration));
 	json_object_set_new(o, "converged", json_boolean(r->converged));
 	json_object_set_new(o, "solve_seconds", json_real(r->solve_s));
-	json_object_set_new(o, "links", json_integer((json_int_t)s->links));
-	json_object_set_new(o, "elements",
-	                    json_integer((json_int_t)s->elements));
-	json_object_set_new(o, "clusters",
-	                    json_integer((json_int_t)s->clusters));
-	json_object_set_new(o, "leaves", json_integer((json_int_t)s->leaves));
-	json_object_set_new(o, "rays", json_integer((json_int_t)r->rays));
+	json_object_set_new(o, "rays_total", json_integer((json_int_t)r->rays));
 	json_object_set_new(
 	        o, "rays_per_second",
 	        json_real(r->solve_s > 0 ? (double)r->rays / r->solve_s : 0.0));
-	json_object_set_new(o, "memory_bytes", mem);
-	json_object_set_new(o, "memory_peak_bytes",
-	                    json_integer(s->mem.peak_total));
+	json_object_set_new(o, "stats", ej_stats(&r->st));
 	return o;
 }
 

@@ -49,16 +49,17 @@ for s in d["scenes"]:
     row = [os.path.basename(s["scene"]), s["triangles"],
            "%.3f" % s["load_seconds"], "%.3f" % s["bvh_seconds"],
            mib(s["bvh_bytes"]),
-           "%d%s" % (s["iterations"], " (conv.)" if s["converged"] else ""),
-           "%.3f" % s["solve_seconds"], s["links"], s["elements"],
-           s["clusters"], s["leaves"], "%.2f" % (s["rays_per_second"] / 1e6),
-           mib(s["memory_bytes"]["total"])]
+           "%d%s" % (s["stats"]["iteration"],
+                     " (conv.)" if s["converged"] else ""),
+           "%.3f" % s["solve_seconds"], s["stats"]["links"]["stored"],
+           s["stats"]["elements"], s["stats"]["clusters"],
+           s["stats"]["leaves"], "%.2f" % (s["rays_per_second"] / 1e6),
+           mib(s["stats"]["memory"]["total_bytes"])]
     print("| " + " | ".join(str(c) for c in row) + " |")
 print()
 print("memory by structure (MiB):")
 for s in d["scenes"]:
-    m = s["memory_bytes"]
+    m = s["stats"]["memory"]["by_kind"]
     print("- %s: " % os.path.basename(s["scene"]) +
-          ", ".join("%s %.2f" % (k, v / 2**20) for k, v in m.items()
-                    if k != "total" and v))
+          ", ".join("%s %.2f" % (k, v / 2**20) for k, v in m.items() if v))
 EOF

@@ -95,9 +95,10 @@ def one_run(out, name, solver, acc, ref, sd):
         run["status"] = "timeout" if rc == "124" else why
         return run
     lux, el = o["illuminance_lux"], o["error_lux"]
-    run.update(status="ok", iterations=o["iterations"], links=o["links"],
-               converged=o["converged"],
-               engine_peak_mb=o["memory_peak_bytes"] / 1e6,
+    st = o["stats"]
+    run.update(status="ok", iterations=st["iteration"],
+               links=st["links"]["stored"], converged=o["converged"],
+               engine_peak_mb=st["memory"]["peak_bytes"] / 1e6,
                solve_s=o["seconds"], query_s=o["query_seconds"],
                lux=lux, error_lux=el)
     if ref is None:

@@ -32,9 +32,8 @@ test_help() {
 	local opt missing=""
 	run --help
 	expect_exit "--help exits 0" 0
-	for opt in solver eps iterations converge max-iterations threads \
-		points json per-iteration oracle no-clustering variation min-edge \
-		mesh-edge rcv-samples vis-samples help; do
+	# The engine's options (rad.h's table) are checked by test_options.
+	for opt in solver iterations points export json per-iteration help; do
 		grep -qF -- "--$opt" "$TMP/out" || missing="$missing --$opt"
 	done
 	for word in metres lux cd/m2 "Exit status"; do
@@ -62,8 +61,8 @@ test_usage_errors() {
 	expect_exit "fractional iterations exits 2" 2 "--iterations"
 	run "$SCENE" --solver simplex
 	expect_exit "unknown solver exits 2" 2 "simplex"
-	run "$SCENE" --iterations 2 --converge 1e-3
-	expect_exit "--iterations with --converge exits 2" 2 "--converge"
+	run "$SCENE" --iterations 2 --tol 1e-3
+	expect_exit "--iterations with --tol exits 2" 2 "--tol"
 	run "$SCENE" --eps
 	expect_exit "missing option value exits 2" 2 "--eps"
 	run "$SCENE" --accuracy 0
@@ -87,12 +86,12 @@ test_accuracy() {
 	if "$PY" - "$TMP/a1.json" "$TMP/a2.json" "$TMP/a3.json" \
 		>"$TMP/err" 2>&1 <<'EOF'; then
 import json, sys
-a, b, c = (json.load(open(p)) for p in sys.argv[1:4])
-assert a["accuracy"] == 0.01 and a["query_tolerance"] == 0.005, a
+a, b, c = (json.load(open(p))["options"] for p in sys.argv[1:4])
+assert a["accuracy"] == 0.01 and a["query_tol"] == 0.005, a
 assert abs(a["eps"] - 2.5e-5) < 1e-12, a["eps"]
-assert abs(a["tolerance"] - 5e-4) < 1e-12, a["tolerance"]
+assert abs(a["tol"] - 5e-4) < 1e-12, a["tol"]
 assert b["eps"] == c["eps"] == 1e-3, (b["eps"], c["eps"])
-assert b["query_tolerance"] == c["query_tolerance"] == 0.005
+assert b["query_tol"] == c["query_tol"] == 0.005
 EOF
 		pass "--accuracy sets eps and tolerances; --eps overrides it"
 	else
@@ -141,10 +140,9 @@ check_json() {
 import json, math, sys
 path, npts, niter = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
 d = json.load(open(path))
-keys = ["illuminance_lux", "error_lux", "accuracy", "query_tolerance",
-        "query_seconds", "iterations", "seconds", "links", "elements",
-        "memory_bytes", "solver", "eps", "converged", "error_estimate",
-        "clusters", "leaves", "rays", "scene", "per_iteration"]
+keys = ["illuminance_lux", "error_lux", "solver", "options", "seconds",
+        "load_seconds", "query_seconds", "converged", "rays_total", "stats",
+        "scene", "per_iteration"]
 missing = [k for k in keys if k not in d]
 assert not missing, "missing keys %s" % missing
 lux = d["illuminance_lux"]
@@ -155,19 +153,22 @@ err = d["error_lux"]
 assert len(err) == npts, "%d error values" % len(err)
 for v, e in zip(lux, err):
     assert math.isfinite(e) and 0 <= e <= max(v, 1e-9), (v, e)
-assert d["accuracy"] == 0.02 and d["query_tolerance"] == 0.01, d["accuracy"]
-assert d["iterations"] == niter, d["iterations"]
+opt = d["options"]
+assert opt["accuracy"] == 0.02 and opt["query_tol"] == 0.01, opt
+st = d["stats"]
+assert st["iteration"] == niter, st["iteration"]
 assert d["solver"] == "hr", d["solver"]
-mem = d["memory_bytes"]
-parts = sum(v for k, v in mem.items() if not k.startswith(("total", "peak")))
-assert mem["total"] == parts > 0, mem
-assert mem["peak_total"] >= mem["peak_work"] >= mem["total"], mem
+mem = st["memory"]
+assert mem["total_bytes"] == sum(mem["by_kind"].values()) > 0, mem
+assert mem["peak_bytes"] >= mem["peak_work_bytes"] >= mem["total_bytes"], mem
 it = d["per_iteration"]
 assert len(it) == niter, len(it)
-for k in ["iteration", "seconds", "links", "links_ss", "links_sc",
-          "links_cc", "links_light", "elements", "clusters", "leaves",
-          "refinements", "residual", "error_estimate", "memory_bytes"]:
+assert it[-1] == st, "the last iteration's stats are the run's stats"
+for k in ["iteration", "seconds", "links", "elements", "clusters", "leaves",
+          "refinements", "residual", "error_estimate", "memory"]:
     assert k in it[-1], "per_iteration lacks " + k
+for k in ["stored", "ss", "sc", "cc", "light", "active", "passive"]:
+    assert k in it[-1]["links"], "links lack " + k
 assert [r["iteration"] for r in it] == list(range(1, niter + 1))
 assert d["scene"]["polygons"] > 0
 print("lux", lux)

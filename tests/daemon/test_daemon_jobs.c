@@ -118,7 +118,7 @@ static void test_job_lifecycle_follows_the_protocol(void **state)
 	assert_true(dm_num(o, "tol") == 1e-3);
 	assert_true(dm_num(o, "accuracy") == 0.02);
 	assert_true(dm_num(o, "query_tol") == 0.01);
-	assert_int_equal(dm_int(o, "max_iterations"), 100);
+	assert_int_equal(dm_int(o, "max_iterations"), 10000);
 	assert_int_equal(dm_int(o, "threads"), 1);
 	json_decref(r);
 
