@@ -3,12 +3,16 @@
  * connection to the daemon, exit codes, and the command functions each
  * file implements.
  *
- * Module map:
- *   luxrad.c   main: option table, argv parsing, --help texts, dispatch
- *   net.c      the connection: connect, hello, requests, frames
- *   cmds.c     scenes, jobs and daemon commands (submit, create, run...)
- *   query.c    query (points file, grid, surfaces) and export
- *   watch.c    watch and run --wait: events, progress bar, JSON lines
+ * Module map, from the bottom up (no file calls one above it):
+ *   args.c         the option table and typed getters of option values
+ *   out.c          JSON lines, byte counts, lenient reads of replies
+ *   net.c          the connection: connect, hello, requests, frames
+ *   cmds.c         scenes, jobs and daemon commands (submit, create...)
+ *   show.c         info and status, printed for people
+ *   cmd_query.c    query (points file, grid, surfaces) and export
+ *   cmd_watch.c    watch and run --wait: events, progress bar, JSON lines
+ *   cmd_sensors.c  sensor-add and sensors
+ *   luxrad.c       main: the command table, argv parsing, --help, dispatch
  *
  * The CLI is thin on purpose: it checks what it can check locally
  * (syntax, numbers, files) and leaves every semantic decision (ranges,
@@ -91,6 +95,14 @@ typedef enum lx_opt {
 #define LX_ENGINE_BITS (((uint64_t)1 << LX_OPT_COUNT) - LX_BIT(ENGINE))
 _Static_assert(LX_OPT_COUNT < 64, "options must fit a command's mask");
 
+/* One option (args.c): long name, value name (NULL: a flag), help, and
+ * whether it takes a value. */
+typedef struct lx_opt_row {
+	const char *name, *meta, *help;
+	int arg;
+} lx_opt_row;
+extern const lx_opt_row lx_opt_table[LX_OPT_COUNT];
+
 /* The connection to the daemon (net.c). */
 typedef struct lx_conn {
 	int fd;               /* -1 when closed */
@@ -148,7 +160,7 @@ int lx_call(lx_ctx *cx, json_t *req, json_t **reply);
  */
 int lx_next_event(lx_ctx *cx, json_t **event);
 
-/* --------------------------------------------------------- luxrad.c */
+/* ----------------------------------------------------------- args.c */
 
 /* Print "luxrad: <message>" and a hint, return LX_EXIT_USAGE. */
 int lx_usage_error(const lx_ctx *cx, const char *fmt, ...)
@@ -162,6 +174,8 @@ int lx_opt_int(const lx_ctx *cx, lx_opt o, long long lo, long long hi,
 int lx_opt_vec3(const lx_ctx *cx, lx_opt o, double out[3]);
 /* Positional argument i as a positive id ("job" / "scene" in messages). */
 int lx_pos_id(const lx_ctx *cx, int i, const char *what, long long *out);
+/* ------------------------------------------------------------ out.c */
+
 /* Print a JSON value on stdout, one line. */
 void lx_print_json(const json_t *v);
 /* Human-readable bytes ("70.5 KiB"). */
@@ -206,7 +220,7 @@ int lx_cmd_sensors(lx_ctx *cx);
 int lx_job_options(lx_ctx *cx, json_t *req);
 
 /*
- * watch.c: having subscribed to job (its current state given), show its
+ * cmd_watch.c: having subscribed to job (its current state given), show its
  * events until it is neither queued nor running.  live: where to draw
  * the progress bar and statistics lines (a terminal), or NULL; json_lines:
  * print each event as a JSON line on stdout.  final_state receives the
@@ -218,7 +232,7 @@ int lx_follow_job(lx_ctx *cx, long long job, const char *state, FILE *live,
 /* Exit code for a final state. */
 int lx_state_exit(const char *state);
 
-/* query.c: the points file format of luxrad-solve --points. */
+/* cmd_query.c: the points file format of luxrad-solve --points. */
 int lx_points_load(const char *path, json_t **points, size_t *n);
 
 #endif

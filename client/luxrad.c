@@ -1,8 +1,9 @@
 /*
  * luxrad.c -- the luxrad command-line client: argv parsing, --help texts
- * and dispatch to the command functions (cmds.c, query.c, watch.c).
+ * and dispatch to the command functions (cmds.c, cmd_*.c, show.c).
  *
- * Every option is declared once (LX_OPTIONS in client.h); each command
+ * Every option is declared once (LX_OPTIONS in client.h and rad.h's
+ * RAD_OPTIONS, as the rows of args.c's table); each command
  * says which options it takes, how many positional arguments, and its
  * help text with examples.  Parsing only collects strings: each command
  * converts and checks its own values, so a bad number is reported with
@@ -16,22 +17,6 @@
 #include <string.h>
 
 #include "client.h"
-
-static const struct {
-	const char *name, *meta, *help;
-	int arg;
-} opt_table[LX_OPT_COUNT] = {
-#define LX_OPT_ROW_(id, name, arg, meta, help) {name, meta, help, arg},
-        LX_OPTIONS(LX_OPT_ROW_)
-#undef LX_OPT_ROW_
-/* from LX_OPT_ENGINE on: the rows of RAD_OPTIONS */
-#define LX_ENGINE_ROW_(field, key, cli, type, def, lo, hi, range, choices,     \
-                       metavar, unit, help)                                    \
-	{cli, RAD_OPT_##type == RAD_OPT_BOOL ? NULL : metavar, help,           \
-	 RAD_OPT_##type != RAD_OPT_BOOL},
-                RAD_OPTIONS(LX_ENGINE_ROW_)
-#undef LX_ENGINE_ROW_
-};
 
 #define GLOBAL_OPTS                                                            \
 	(LX_BIT(HELP) | LX_BIT(JSON) | LX_BIT(CONNECT) | LX_BIT(TOKEN_FILE))
@@ -165,16 +150,16 @@ static void print_option(lx_opt o)
 	char lhs[64], def[64] = "", text[512];
 
 	snprintf(lhs, sizeof lhs, "%s--%s", o == LX_OPT_OUTPUT ? "-o, " : "",
-	         opt_table[o].name);
-	if (opt_table[o].meta) {
+	         lx_opt_table[o].name);
+	if (lx_opt_table[o].meta) {
 		size_t n = strlen(lhs);
-		snprintf(lhs + n, sizeof lhs - n, " %s", opt_table[o].meta);
+		snprintf(lhs + n, sizeof lhs - n, " %s", lx_opt_table[o].meta);
 	}
 	if (o >= LX_OPT_ENGINE &&
 	    rad_option_defs[o - LX_OPT_ENGINE].type != RAD_OPT_BOOL)
 		rad_option_default_text(&rad_option_defs[o - LX_OPT_ENGINE],
 		                        def, sizeof def);
-	snprintf(text, sizeof text, "%s%s%s%s", opt_table[o].help,
+	snprintf(text, sizeof text, "%s%s%s%s", lx_opt_table[o].help,
 	         def[0] ? " [" : "", def, def[0] ? "]" : "");
 	rp_help_row(stdout, lhs, text);
 }
@@ -237,160 +222,13 @@ static void help_command(const cmd_def *c)
 	printf("\n%s", c->text);
 }
 
-/* -------------------------------------------------------------- helpers */
-
-int lx_usage_error(const lx_ctx *cx, const char *fmt, ...)
-{
-	va_list ap;
-
-	fprintf(stderr, "luxrad: ");
-	va_start(ap, fmt);
-	vfprintf(stderr, fmt, ap);
-	va_end(ap);
-	if (cx && cx->cmd)
-		fprintf(stderr, "\nTry 'luxrad %s --help'.\n", cx->cmd);
-	else
-		fprintf(stderr, "\nTry 'luxrad --help'.\n");
-	return LX_EXIT_USAGE;
-}
-
-int lx_opt_double(const lx_ctx *cx, lx_opt o, double *out)
-{
-	const char *s = cx->val[o];
-	char *end;
-
-	if (!cx->given[o])
-		return 1;
-	errno = 0;
-	double v = strtod(s, &end);
-	if (end == s || *end || errno == ERANGE || !isfinite(v)) {
-		lx_usage_error(cx, "--%s: '%s' is not a finite number",
-		               opt_table[o].name, s);
-		return -1;
-	}
-	*out = v;
-	return 0;
-}
-
-int lx_opt_int(const lx_ctx *cx, lx_opt o, long long lo, long long hi,
-               long long *out)
-{
-	const char *s = cx->val[o];
-	char *end;
-
-	if (!cx->given[o])
-		return 1;
-	errno = 0;
-	long long v = strtoll(s, &end, 10);
-	if (end == s || *end || errno == ERANGE || v < lo || v > hi) {
-		lx_usage_error(cx, "--%s: '%s' is not an integer in %lld..%lld",
-		               opt_table[o].name, s, lo, hi);
-		return -1;
-	}
-	*out = v;
-	return 0;
-}
-
-int lx_opt_vec3(const lx_ctx *cx, lx_opt o, double out[3])
-{
-	const char *s = cx->val[o];
-	char *end;
-
-	for (int i = 0; i < 3; i++) {
-		errno = 0;
-		out[i] = strtod(s, &end);
-		if (end == s || errno == ERANGE || !isfinite(out[i]) ||
-		    *end != (i < 2 ? ',' : '\0')) {
-			lx_usage_error(cx,
-			               "--%s: '%s' is not three finite numbers "
-			               "'x,y,z'",
-			               opt_table[o].name, cx->val[o]);
-			return -1;
-		}
-		s = end + 1;
-	}
-	return 0;
-}
-
-int lx_pos_id(const lx_ctx *cx, int i, const char *what, long long *out)
-{
-	const char *s = cx->pos[i];
-	char *end;
-
-	errno = 0;
-	long long v = strtoll(s, &end, 10);
-	if (end == s || *end || errno == ERANGE || v <= 0 ||
-	    strspn(s, "0123456789") != strlen(s)) {
-		lx_usage_error(cx, "%s id '%s' is not a positive integer", what,
-		               s);
-		return -1;
-	}
-	*out = v;
-	return 0;
-}
-
-void lx_print_json(const json_t *v)
-{
-	json_dumpf(v, stdout, JSON_COMPACT);
-	putchar('\n');
-	fflush(stdout);
-}
-
-const char *lx_fmt_bytes(double b, char *buf, size_t len)
-{
-	static const char *const unit[] = {"B", "KiB", "MiB", "GiB", "TiB"};
-	int u = 0;
-
-	while (b >= 1024 && u < 4) {
-		b /= 1024;
-		u++;
-	}
-	snprintf(buf, len, u ? "%.1f %s" : "%.0f %s", b, unit[u]);
-	return buf;
-}
-
-long long lx_jint(const json_t *o, const char *k)
-{
-	return (long long)json_integer_value(json_object_get(o, k));
-}
-
-double lx_jdbl(const json_t *o, const char *k)
-{
-	return json_number_value(json_object_get(o, k));
-}
-
-const char *lx_jstr(const json_t *o, const char *k)
-{
-	const char *s = json_string_value(json_object_get(o, k));
-	return s ? s : "?";
-}
-
-const char *lx_jnum(const json_t *o, const char *k, const char *fmt, char *buf,
-                    size_t len)
-{
-	json_t *v = json_object_get(o, k);
-
-	if (!json_is_number(v))
-		return "?";
-	snprintf(buf, len, fmt, json_number_value(v));
-	return buf;
-}
-
-const char *lx_jbytes(const json_t *o, const char *k, char *buf, size_t len)
-{
-	json_t *v = json_object_get(o, k);
-
-	return json_is_number(v) ? lx_fmt_bytes(json_number_value(v), buf, len)
-	                         : "?";
-}
-
 /* -------------------------------------------------------------- parsing */
 
 static int find_option(const char *name, size_t len)
 {
 	for (int o = 0; o < LX_OPT_COUNT; o++)
-		if (strlen(opt_table[o].name) == len &&
-		    !strncmp(opt_table[o].name, name, len))
+		if (strlen(lx_opt_table[o].name) == len &&
+		    !strncmp(lx_opt_table[o].name, name, len))
 			return o;
 	return -1;
 }
@@ -418,21 +256,21 @@ static int parse_option(lx_ctx *cx, int argc, char **argv, int *i,
 	}
 	if (!(allowed & ((uint64_t)1 << o)) && cx->cmd)
 		return lx_usage_error(cx, "option --%s does not apply to '%s'",
-		                      opt_table[o].name, cx->cmd);
+		                      lx_opt_table[o].name, cx->cmd);
 	if (!(allowed & ((uint64_t)1 << o)))
 		return lx_usage_error(cx, "option --%s must follow the command",
-		                      opt_table[o].name);
-	if (opt_table[o].arg && !value) {
+		                      lx_opt_table[o].name);
+	if (lx_opt_table[o].arg && !value) {
 		if (*i + 1 >= argc)
 			return lx_usage_error(cx,
 			                      "option --%s needs a value "
 			                      "(%s)",
-			                      opt_table[o].name,
-			                      opt_table[o].meta);
+			                      lx_opt_table[o].name,
+			                      lx_opt_table[o].meta);
 		value = argv[++*i];
-	} else if (!opt_table[o].arg && value) {
+	} else if (!lx_opt_table[o].arg && value) {
 		return lx_usage_error(cx, "option --%s takes no value",
-		                      opt_table[o].name);
+		                      lx_opt_table[o].name);
 	}
 	cx->val[o] = value;
 	cx->given[o]++;

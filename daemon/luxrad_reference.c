@@ -289,58 +289,19 @@ static int parse_args(int argc, char **argv, cli_args *a)
 
 typedef struct point_list {
 	double *xyz; /* 6 doubles per point: position, normal */
-	size_t n, cap;
+	size_t n;
 } point_list;
-
-static int points_push(point_list *pl, const double p[6])
-{
-	if (pl->n == pl->cap) {
-		size_t ncap = pl->cap ? 2 * pl->cap : 64;
-		double *nx = realloc(pl->xyz, ncap * 6 * sizeof(double));
-		if (!nx)
-			return -1;
-		pl->xyz = nx;
-		pl->cap = ncap;
-	}
-	memcpy(pl->xyz + 6 * pl->n++, p, 6 * sizeof(double));
-	return 0;
-}
 
 /* Load a points file; malformed lines are usage errors naming file:line. */
 static int load_points(const char *path, point_list *pl)
 {
-	FILE *f = fopen(path, "r");
-	char *line = NULL;
-	size_t cap = 0;
-	unsigned long lineno = 0;
-	int rc = EXIT_OKAY;
-
-	if (!f) {
-		fprintf(stderr, PROG ": cannot open points file '%s': %s\n",
-		        path, strerror(errno));
-		return EXIT_FAIL;
-	}
-	while (rc == EXIT_OKAY && getline(&line, &cap, f) != -1) {
-		double p[6];
-		const char *why = NULL;
-		lineno++;
-		int r = rp_point_line_parse(line, p, &why);
-		if (r < 0) {
-			fprintf(stderr, PROG ": %s:%lu: %s\n", path, lineno,
-			        why);
-			rc = EXIT_USAGE;
-		} else if (r > 0 && points_push(pl, p) != 0) {
-			fprintf(stderr, PROG ": out of memory\n");
-			rc = EXIT_FAIL;
-		}
-	}
-	if (rc == EXIT_OKAY && ferror(f)) {
-		fprintf(stderr, PROG ": cannot read '%s'\n", path);
-		rc = EXIT_FAIL;
-	}
-	free(line);
-	fclose(f);
-	return rc;
+	char msg[1024];
+	int rc = rp_points_read(path, &pl->xyz, &pl->n, msg, sizeof(msg));
+	if (rc != 0)
+		fprintf(stderr, PROG ": %s\n", msg);
+	return rc == 0              ? EXIT_OKAY
+	       : rc == RP_CLI_USAGE ? EXIT_USAGE
+	                            : EXIT_FAIL;
 }
 
 static int load_scene(const char *path, rad_scene **sc, rad_gltf_info *info,

@@ -302,6 +302,15 @@ typedef struct rp_cli_ops {
 } rp_cli_ops;
 int rp_cli_scan(int argc, char **argv, const rp_cli_ops *ops, void *ud,
                 const char **scene, int *help, char *msg, size_t len);
+/*
+ * Read a points file (rp_point_line_parse's format): *xyz gets 6 doubles
+ * per point (malloc'ed, the caller frees; NULL when there are none), *n
+ * the count.  Returns 0; RP_CLI_USAGE with "PATH:LINE: why" for a
+ * malformed line; -1 with the reason when the file cannot be opened or
+ * read, or memory runs out.
+ */
+int rp_points_read(const char *path, double **xyz, size_t *n, char *msg,
+                   size_t len);
 /* Format a usage message into msg; returns RP_CLI_USAGE. */
 int rp_cli_fail(char *msg, size_t len, const char *fmt, ...)
         __attribute__((format(printf, 3, 4)));

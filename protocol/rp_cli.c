@@ -119,3 +119,57 @@ int rp_cli_scan(int argc, char **argv, const rp_cli_ops *ops, void *ud,
 		*help = 1;
 	return rc == RP_CLI_HELP ? 0 : rc;
 }
+
+int rp_points_read(const char *path, double **xyz, size_t *n, char *msg,
+                   size_t len)
+{
+	FILE *f = fopen(path, "r");
+	char *line = NULL;
+	size_t cap = 0, have = 0;
+	unsigned long lineno = 0;
+	double *pts = NULL;
+	int rc = 0;
+
+	*xyz = NULL;
+	*n = 0;
+	if (!f) {
+		snprintf(msg, len, "cannot open points file '%s': %s", path,
+		         strerror(errno));
+		return -1;
+	}
+	while (rc == 0 && getline(&line, &cap, f) != -1) {
+		double p[6];
+		const char *why = NULL;
+		int r = rp_point_line_parse(line, p, &why);
+		lineno++;
+		if (r < 0) {
+			rc = rp_cli_fail(msg, len, "%s:%lu: %s", path, lineno,
+			                 why);
+		} else if (r > 0 && *n == have) {
+			size_t ncap = have ? 2 * have : 64;
+			double *np = realloc(pts, ncap * 6 * sizeof(double));
+			if (!np) {
+				snprintf(msg, len, "out of memory");
+				rc = -1;
+			} else {
+				pts = np;
+				have = ncap;
+			}
+		}
+		if (rc == 0 && r > 0)
+			memcpy(pts + 6 * (*n)++, p, sizeof(p));
+	}
+	if (rc == 0 && ferror(f)) {
+		snprintf(msg, len, "cannot read '%s'", path);
+		rc = -1;
+	}
+	free(line);
+	fclose(f);
+	if (rc != 0) {
+		free(pts);
+		*n = 0;
+		return rc;
+	}
+	*xyz = pts;
+	return 0;
+}

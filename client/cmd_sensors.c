@@ -1,5 +1,5 @@
 /*
- * sensors.c -- luxrad sensor-add and luxrad sensors: the named points
+ * cmd_sensors.c -- luxrad sensor-add and luxrad sensors: the named points
  * whose illuminance the daemon publishes over Modbus after every
  * iteration (protocol sensor.add / sensor.list).
  */

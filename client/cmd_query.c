@@ -1,5 +1,5 @@
 /*
- * query.c -- illuminance queries (points file, grid, surfaces) and the
+ * cmd_query.c -- illuminance queries (points file, grid, surfaces) and the
  * GLB export.
  *
  * A points file may hold more points than one request can carry: the
@@ -26,52 +26,28 @@
 
 int lx_points_load(const char *path, json_t **points, size_t *n)
 {
-	FILE *f = fopen(path, "r");
-	char *line = NULL;
-	size_t cap = 0;
-	unsigned long lineno = 0;
-	int rc = LX_EXIT_OK;
+	char msg[1024];
+	double *xyz;
 	json_t *arr;
 
 	*points = NULL;
 	*n = 0;
-	if (!f) {
-		fprintf(stderr, "luxrad: cannot open points file '%s': %s\n",
-		        path, strerror(errno));
+	if (rp_points_read(path, &xyz, n, msg, sizeof(msg)) != 0) {
+		fprintf(stderr, "luxrad: %s\n", msg);
+		return LX_EXIT_USAGE;
+	}
+	if (*n == 0) {
+		fprintf(stderr, "luxrad: %s: no points in the file\n", path);
 		return LX_EXIT_USAGE;
 	}
 	arr = json_array();
-	while (rc == LX_EXIT_OK && getline(&line, &cap, f) != -1) {
-		double p[6];
-		const char *why = NULL;
-		lineno++;
-		int r = rp_point_line_parse(line, p, &why);
-		if (r < 0) {
-			fprintf(stderr, "luxrad: %s:%lu: %s\n", path, lineno,
-			        why);
-			rc = LX_EXIT_USAGE;
-		} else if (r > 0) {
-			json_array_append_new(arr, json_pack("[ffffff]", p[0],
-			                                     p[1], p[2], p[3],
-			                                     p[4], p[5]));
-		}
+	for (size_t i = 0; i < *n; i++) {
+		const double *p = xyz + 6 * i;
+		json_array_append_new(arr, json_pack("[ffffff]", p[0], p[1],
+		                                     p[2], p[3], p[4], p[5]));
 	}
-	if (rc == LX_EXIT_OK && ferror(f)) {
-		fprintf(stderr, "luxrad: cannot read '%s'\n", path);
-		rc = LX_EXIT_USAGE;
-	}
-	if (rc == LX_EXIT_OK && json_array_size(arr) == 0) {
-		fprintf(stderr, "luxrad: %s: no points in the file\n", path);
-		rc = LX_EXIT_USAGE;
-	}
-	free(line);
-	fclose(f);
-	if (rc != LX_EXIT_OK) {
-		json_decref(arr);
-		return rc;
-	}
+	free(xyz);
 	*points = arr;
-	*n = json_array_size(arr);
 	return LX_EXIT_OK;
 }
 

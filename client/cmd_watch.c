@@ -1,5 +1,5 @@
 /*
- * watch.c -- following a job's events: the watch command, and the wait of
+ * cmd_watch.c -- following a job's events: the watch command, and the wait of
  * run --wait.
  *
  * On a terminal the progress of the running iteration is a bar redrawn
