@@ -1,6 +1,6 @@
 /*
  * hr.c -- classic hierarchical radiosity with clustering (Hanrahan et al.
- * 1991; Smits-Arvo-Greenberg 1994, Sillion 1995), ALGORITHM.md §2.
+ * 1991; Smits-Arvo-Greenberg 1994, Sillion 1995), docs/ALGORITHM.md §4.
  *
  * One iteration: refine the links whose oracle fails, gather irradiance
  * over every link, push it down the hierarchy, update the leaves

@@ -4,7 +4,7 @@
  * refinement code asks each the same questions (where, how big, how
  * bright, can it split, what are its children) and gets form factors for
  * any pair.  Clusters are seen through their projected area (hier.h),
- * not the isotropic volume of ALGORITHM.md §2 (area A/4 everywhere).
+ * not the isotropic volume (area A/4 everywhere) of docs/ALGORITHM.md §4.6.
  */
 #ifndef LUXRAD_HR_NODES_H
 #define LUXRAD_HR_NODES_H

@@ -182,7 +182,7 @@ typedef enum rad_solver_kind {
 	RAD_SOLVER_PROGRESSIVE, /* shooting with adaptive subdivision */
 	RAD_SOLVER_HR,          /* hierarchical radiosity (+ clustering) */
 	RAD_SOLVER_RMB, /* reduced-memory HR: radiosity to transmit, link
-	                   hierarchy, RefineAndGather (ALGORITHM.md §4) */
+	                   hierarchy, RefineAndGather (docs/ALGORITHM.md §5) */
 	RAD_SOLVER_NKINDS
 } rad_solver_kind;
 
@@ -192,7 +192,7 @@ typedef enum rad_oracle {
 	RAD_ORACLE_BF,      /* emitter radiosity x form factor */
 } rad_oracle;
 
-/* rmb: which links RefineAndGather keeps (ALGORITHM.md §4, criterion). */
+/* rmb: which links RefineAndGather keeps (docs/ALGORITHM.md §5.4). */
 typedef enum rad_store {
 	/* The default: the report's rule, and also no children for a link
 	 * whose next increment (this one times the source's largest
@@ -485,12 +485,12 @@ const char *rad_solver_kind_name(rad_solver_kind k);
 #define RAD_STAT_DIM_MEM
 
 /*
- * links_useful are the report's "useful" links (§3.2.4): their increment
+ * links_useful are the report's "useful" links: their increment
  * (this iteration's transfer minus the last one's) would fail the oracle
  * one level up (4 x its oracle value > eps), so the exchange needs them at
  * their level.  energy_hist bins the oracle's BFA value (flux as a
  * fraction of the total source flux); the last bin takes everything
- * smaller, zero too.
+ * smaller, zero too.  Useful links: docs/ALGORITHM.md §9.2.
  */
 typedef struct rad_stats {
 #define RAD_STAT_FIELD_(field, group, key, type, ...)                          \

@@ -1,14 +1,15 @@
 /*
  * rmb.c -- reduced-memory hierarchical radiosity: radiosity to transmit,
- * the link hierarchy and RefineAndGather (ALGORITHM.md §4, the report's
- * RMbright).
+ * the link hierarchy and RefineAndGather (docs/ALGORITHM.md §5, the
+ * report's RMbright).
  *
  * Every node carries dB, the radiosity it still has to transmit.  At the
  * start dB = B = E (pulled up the trees); each iteration gathers
  * I = sum F dB over the links, pushes I down, sets dB = rho I and B += dB
  * on the leaves and pulls both up.  A light transmits in the first
- * iteration only.  The result equals classic HR for the same links (§4.2.2);
- * the oracle is applied to dB, so links coarsen as the increments shrink.
+ * iteration only.  The result equals classic HR for the same links
+ * (docs/ALGORITHM.md §5.1); the oracle is applied to dB, so links coarsen
+ * as the increments shrink.
  *
  * DESIGN
  * The link hierarchy.  A link that was refined stays in memory as a
@@ -45,8 +46,9 @@
  * This keeps the memory of iteration 1 -- where most transfers come from
  * the sources -- close to what is finally stored.
  *
- * Keeping (the creation criterion, §4.3.1): a link is kept when its source
- * and its receiver both reflect (RAD_STORE_MINIMAL, the report's rule).
+ * Keeping (the creation criterion, docs/ALGORITHM.md §5.4): a link is kept
+ * when its source and its receiver both reflect (RAD_STORE_MINIMAL, the
+ * report's rule).
  * RAD_STORE_ANTICIPATE also refuses to keep the children of a link whose
  * next increment -- this one times the source's largest reflectance --
  * will pass the oracle at the link's own level (coarse_next()): they are
@@ -54,10 +56,11 @@
  * form factor.
  * A passive link with at least one child kept keeps its run (compacted
  * in place to the kept children); one with none becomes active again.  A
- * passive link found at its level deletes its whole subtree (§4.3.2).
+ * passive link found at its level deletes its whole subtree
+ * (docs/ALGORITHM.md §5.2).
  *
- * Recursive form factors (§4.3.4): every passive link's form factor is
- * rebuilt from its children after each walk, F = sum of w_c F_c
+ * Recursive form factors (docs/ALGORITHM.md §5.5): each passive link's F
+ * is rebuilt from its children after each walk, F = sum of w_c F_c
  * (child_weight()), which is exact for uniform radiosity over the
  * reflecting polygons and, for a cluster's self-link, gives the true
  * self-transfer (zero for convex contents) instead of the isotropic guess.
@@ -248,7 +251,7 @@ static double mark_black(rad_solver *sv, uint32_t id)
 
 /*
  * Weight of child link c in its parent p's recursive form factor
- * (ALGORITHM.md §4.3.4: F_p = sum of weight x F_c).  After the first
+ * (docs/ALGORITHM.md §5.5: F_p = sum of weight x F_c).  After the first
  * iteration only reflecting polygons transmit or use what they receive,
  * so both averages run over reflecting area: a split receiver gives the
  * mean over its reflecting children (a cluster's irradiance is the mean of

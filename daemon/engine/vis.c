@@ -16,7 +16,7 @@
  *   the monitor does not see them and nothing is counted twice.
  * - One triangle geometry; a parallelogram becomes two triangles, so
  *   prim_poly[] maps Embree's primitive ids back to scene polygons.
- * - Self-intersection: see vis.h and PITFALLS.md.  Both ends of a segment
+ * - Self-intersection (vis.h, docs/PITFALLS.md §1.1): both ends of a segment
  *   are moved off their surfaces along the normal and the ray is shortened
  *   by eps at both ends.  eps scales with the scene (RAD_VIS_EPS_REL x
  *   diagonal) so results are scale-invariant, but never drops below what

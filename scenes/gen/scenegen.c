@@ -6,7 +6,7 @@
  * from its published measurements, a small office, analytic test boxes and
  * rooms, random "field" scenes sized by triangle count, and synthetic
  * stand-ins for the study scenes of the report the engine follows (herd,
- * empty / full / very bright / grand hall; docs/ALGORITHM.md section 3).
+ * empty / full / very bright / grand hall; docs/ALGORITHM.md §9.1).
  *
  * Everything is deterministic: randomness comes from our own splitmix64
  * generator with fixed default seeds, never rand(), so a scene regenerated

@@ -1,8 +1,8 @@
 """study_report.py -- turn luxrad-study's CSV files into report.md and PNG
 plots (gnuplot, pngcairo).  Usage: study_report.py OUTDIR
 
-The report's own figures (ALGORITHM.md, fig. 4.4, 4.7, 4.8) are printed
-beside ours; they are literature values, not measured here.
+The report's own figures (fig. 4.4, 4.7, 4.8; docs/ALGORITHM.md §9.3) are
+printed beside ours; they are literature values, not measured here.
 """
 import csv
 import os
@@ -43,7 +43,7 @@ for s in summary:
                   100 * float(s["grid_rms_rel"]), s["links_rmb_minimal"],
                   mb(s["peak_rmb_minimal"])))
 md.append("")
-md.append("The report (1998, SGI; ALGORITHM.md §4):")
+md.append("The report (1998, SGI; docs/ALGORITHM.md §9.3):")
 md.append("")
 md.append("| scene | links classic | links new | memory classic MB | "
           "memory new MB | time 4 it. classic / new |")

@@ -171,7 +171,7 @@ static void check_uniform_box(rad_solver_kind kind, double rho,
 
 /*
  * rmb in the closed box.  Its increments go through links that coarsen as
- * they shrink, so leaf errors are larger than hr's (the report's §4.2.3:
+ * they shrink, so leaf errors are larger than hr's (docs/ALGORITHM.md §5.1:
  * errors add up over iterations); what must hold is the bound: the
  * iteration converges at any reflectance below 1 (the energy bound in
  * rmb.c), the area mean is right, every value finite and positive, and
