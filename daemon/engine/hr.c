@@ -7,16 +7,11 @@
  * (B = E + rho I), pull radiosity back up.
  *
  * DESIGN
- * Refinement works in waves so that it is parallel and deterministic.  A
- * wave is a list of candidate pairs (receiver, source).  Evaluating a
- * candidate -- oracle on an estimated form factor, then the accurate form
- * factor with shadow rays for those kept -- is pure computation written to
- * the candidate's own slot, done by the worker threads.  Applying the
- * results is serial, in wave order: kept candidates become links (prepended
- * to their receiver's list), refused ones are split -- elements made on
- * demand, always by this one thread -- into the children pairs of the next
- * wave.  Element ids, link order and sums are therefore the same for any
- * thread count, and so is every result.
+ * Refinement works in waves (wave.c), breadth first: a wave is a list of
+ * candidate pairs (receiver, source), judged by the worker threads and
+ * applied in order: kept candidates become links (prepended to their
+ * receiver's list), refused ones are split into the children pairs of
+ * the next wave.
  *
  * Initial links: with clustering, the root cluster's self-link plus one
  * link from every light to the root; without, every facing pair of input
@@ -47,34 +42,16 @@
 #include <string.h>
 
 #include "err.h"
-#include "hr_nodes.h"
-#include "solver.h"
-
-/* What evaluating a candidate decided. */
-enum { ACT_DROP = 0, ACT_STORE, ACT_SPLIT, ACT_SPLIT_RCV };
+#include "wave.h"
 
 typedef struct hr_pair {
 	uint32_t rcv, src;
 	uint32_t rcv_only; /* split the receiver, not the larger end */
 } hr_pair;
 
-typedef struct hr_eval {
-	float ff, spread;
-	uint8_t action;
-} hr_eval;
-
-typedef struct hr_vec { /* growable array of pairs, SCRATCH */
-	hr_pair *v;
-	size_t n, cap;
-} hr_vec;
-
 typedef struct hr_state {
-	hr_vec cand, split; /* current wave, pairs to split */
-	hr_eval *eval;      /* one per candidate */
-	size_t eval_cap;
-	uint64_t *rays;   /* per-thread ray counters */
+	rad_wave wave;    /* items: hr_pair */
 	int started;      /* initial links made */
-	int force_store;  /* cancelled: keep pairs at their level */
 	double mean_B;    /* area-mean photopic radiosity of the last step */
 	double last_r;    /* residual of the last step */
 	int frozen;       /* refinement stopped (hr_step) */
@@ -86,28 +63,12 @@ typedef struct hr_state {
 	size_t vals_cap;
 } hr_state;
 
-/* Rows of initial polygon pairs evaluated at once without clustering. */
-#define HR_BLOCK_PAIRS (1u << 20)
-
-static rad_status vec_push(rad_solver *sv, hr_vec *v, uint32_t r, uint32_t s,
-                           uint32_t rcv_only)
+static rad_status push_pair(rad_solver *sv, wave_list *v, uint32_t r,
+                            uint32_t s, uint32_t rcv_only)
 {
-	hr_pair *p = rad_mem_grow(&sv->mem, RAD_MEM_SCRATCH, v->v, &v->cap,
-	                          v->n + 1, sizeof(*p), 1024);
-	if (!p)
-		return RAD_ERR_NOMEM;
-	v->v = p;
-	v->v[v->n].rcv = r;
-	v->v[v->n].src = s;
-	v->v[v->n].rcv_only = rcv_only;
-	v->n++;
-	return RAD_OK;
-}
-
-static void vec_free(rad_solver *sv, hr_vec *v)
-{
-	rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, v->v);
-	memset(v, 0, sizeof(*v));
+	const hr_state *st = sv->impl;
+	hr_pair p = {r, s, rcv_only};
+	return wave_push(sv, &st->wave, v, &p);
 }
 
 /* Oracle value of the link on the source's full radiosity. */
@@ -134,11 +95,6 @@ static int spread_fails(const rad_solver *sv, uint32_t src, double spread)
 	return 0.5 * node_luma_B(&sv->h, src) * spread > spread_limit(sv);
 }
 
-static int pair_refinable(const rad_hier *h, uint32_t r, uint32_t s)
-{
-	return node_splittable(h, r) || node_splittable(h, s);
-}
-
 /*
  * Decide a candidate.  Split while the energy it would carry (oracle on the
  * estimated form factor) is above eps; once at that level, compute the real
@@ -147,58 +103,25 @@ static int pair_refinable(const rad_hier *h, uint32_t r, uint32_t s)
  * form factor right near corners and shadow edges, which the energy test
  * alone does not (it decides the level of the source, not of the receiver).
  */
-static uint8_t evaluate(rad_solver *sv, uint32_t r, uint32_t s, float *ff,
-                        float *spread, uint64_t *rays)
+static uint8_t judge(rad_solver *sv, const void *item, int may_split,
+                     wave_verdict *out, uint64_t *rays)
 {
 	const rad_hier *h = &sv->h;
+	const hr_pair *p = item;
+	uint32_t r = p->rcv, s = p->src;
 	if (r == s) /* a cluster's self-link: always opened up */
-		return node_is_cluster(r) ? ACT_SPLIT : ACT_DROP;
+		return node_is_cluster(r) ? WAVE_SPLIT : WAVE_DROP;
 	if (!node_facing(h, r, s))
-		return ACT_DROP;
-	hr_state *st = sv->impl;
-	int may_split = !st->force_store;
-	if (may_split && pair_refinable(h, r, s) &&
+		return WAVE_DROP;
+	if (may_split && wave_refinable(h, r, s) &&
 	    oracle(sv, r, s, node_ff_estimate(h, r, s)) > sv->opt.eps)
-		return ACT_SPLIT;
+		return WAVE_SPLIT;
 	double sp = 0, f = node_ff(sv, r, s, rays, &sp);
 	if (may_split && node_splittable(h, r) && spread_fails(sv, s, sp))
-		return ACT_SPLIT_RCV;
-	/* A cluster's few sample points seeing nothing of the other end
-	 * prove nothing about its contents.  While the pair could carry
-	 * little even at its bound (box gap), keep it as a zero link that
-	 * later iterations re-test on that bound (see retest_list); else
-	 * look closer now.  Between
-	 * surfaces the samples cover both ends, and an all-blocked answer
-	 * has already been re-checked with other points
-	 * (rad_ff_patch_spread): zero means zero. */
-	if (!(f > 0) && (node_is_cluster(r) || node_is_cluster(s))) {
-		if (may_split &&
-		    oracle(sv, r, s, node_ff_bound(h, r, s)) > sv->opt.eps)
-			return ACT_SPLIT;
-		*ff = 0;
-		*spread = 0;
-		return ACT_STORE;
-	}
-	*ff = (float)f;
-	*spread = (float)sp;
-	return f > 0 ? ACT_STORE : ACT_DROP;
-}
-
-typedef struct eval_job {
-	rad_solver *sv;
-	hr_state *st;
-} eval_job;
-
-static void eval_range(void *ud, size_t b, size_t e, int thread)
-{
-	eval_job *j = ud;
-	for (size_t i = b; i < e; i++) {
-		hr_pair p = j->st->cand.v[i];
-		hr_eval *out = &j->st->eval[i];
-		out->ff = out->spread = 0;
-		out->action = evaluate(j->sv, p.rcv, p.src, &out->ff,
-		                       &out->spread, &j->st->rays[thread]);
-	}
+		return WAVE_SPLIT_RCV;
+	/* A zero link is re-tested on its bound (retest_list). */
+	return wave_at_level(sv, r, s, node_luma_B(h, s), f, sp, may_split,
+	                     out);
 }
 
 static rad_status store_link(rad_solver *sv, uint32_t r, uint32_t s, float ff,
@@ -214,83 +137,49 @@ static rad_status store_link(rad_solver *sv, uint32_t r, uint32_t s, float ff,
 	return RAD_OK;
 }
 
-/* Evaluate the current wave in parallel, then apply it in order. */
-static rad_status run_wave(rad_solver *sv, hr_state *st)
+/* A candidate kept becomes a link; one refused waits to be split. */
+static rad_status apply(rad_solver *sv, const void *item, const wave_verdict *v)
 {
-	size_t n = st->cand.n;
-	if (n > st->eval_cap) {
-		hr_eval *e = rad_mem_realloc(&sv->mem, RAD_MEM_SCRATCH,
-		                             st->eval, n * sizeof(*e));
-		if (!e)
-			return RAD_ERR_NOMEM;
-		st->eval = e;
-		st->eval_cap = n;
-	}
-	eval_job job = {sv, st};
-	rad_par_for(sv->par, n, 16, eval_range, &job);
-	for (size_t i = 0; i < n; i++) {
-		hr_pair p = st->cand.v[i];
-		rad_status rs = RAD_OK;
-		uint8_t act = st->eval[i].action;
-		if (act == ACT_STORE)
-			rs = store_link(sv, p.rcv, p.src, st->eval[i].ff,
-			                st->eval[i].spread);
-		else if (act == ACT_SPLIT || act == ACT_SPLIT_RCV)
-			rs = vec_push(sv, &st->split, p.rcv, p.src,
-			              act == ACT_SPLIT_RCV);
-		if (rs)
-			return rs;
-	}
-	st->cand.n = 0;
+	hr_state *st = sv->impl;
+	const hr_pair *p = item;
+	if (v->action == WAVE_LEVEL)
+		return store_link(sv, p->rcv, p->src, v->ff, v->spread);
+	if (v->action == WAVE_SPLIT || v->action == WAVE_SPLIT_RCV)
+		return push_pair(sv, &st->wave.held, p->rcv, p->src,
+		                 v->action == WAVE_SPLIT_RCV);
 	return RAD_OK;
 }
 
 /* Turn the pairs to split into the children pairs of the next wave. */
 static rad_status expand_splits(rad_solver *sv, hr_state *st)
 {
-	rad_hier *h = &sv->h;
-	for (size_t i = 0; i < st->split.n; i++) {
-		hr_pair p = st->split.v[i];
-		uint32_t kr[4] = {p.rcv}, ks[4] = {p.src};
-		int nr = 1, ns = 1;
-		int side = node_split_side(h, p.rcv, p.src, (int)p.rcv_only);
-		if (side & 1)
-			nr = node_children(h, p.rcv, kr);
-		if (side == 3) {
-			ns = nr;
-			memcpy(ks, kr, sizeof(ks));
-		} else if (side & 2) {
-			ns = node_children(h, p.src, ks);
-		}
-		if (nr == 0 || ns == 0)
+	for (size_t i = 0; i < st->wave.held.n; i++) {
+		const hr_pair *p = (const hr_pair *)st->wave.held.v + i;
+		uint32_t kr[WAVE_KIDS], ks[WAVE_KIDS];
+		int side, n = wave_children(&sv->h, p->rcv, p->src,
+		                            (int)p->rcv_only, kr, ks, &side);
+		if (n < 0)
 			return RAD_ERR_NOMEM;
-		for (int a = 0; a < nr; a++) {
-			for (int b = 0; b < ns; b++) {
-				if (kr[a] == ks[b] && !node_is_cluster(kr[a]))
-					continue; /* planar: F = 0 */
-				rad_status rs = vec_push(sv, &st->cand, kr[a],
-				                         ks[b], 0);
-				if (rs)
-					return rs;
-			}
+		for (int k = 0; k < n; k++) {
+			rad_status rs =
+			        push_pair(sv, &st->wave.todo, kr[k], ks[k], 0);
+			if (rs)
+				return rs;
 		}
 	}
-	st->split.n = 0;
+	st->wave.held.n = 0;
 	return RAD_OK;
 }
 
 /* Run waves until nothing is left to split. */
 static rad_status refine_waves(rad_solver *sv, hr_state *st)
 {
-	while (st->cand.n > 0 || st->split.n > 0) {
-		if (st->cand.n > 0) {
-			rad_status rs = run_wave(sv, st);
-			if (rs)
-				return rs;
-		}
-		if (rad_solver_cancelled(sv))
-			st->force_store = 1; /* finish at the current level */
-		rad_status rs = expand_splits(sv, st);
+	while (st->wave.todo.n > 0 || st->wave.held.n > 0) {
+		rad_status rs = wave_run(sv, &st->wave, st->wave.todo.v,
+		                         st->wave.todo.n, judge, apply);
+		st->wave.todo.n = 0;
+		if (!rs)
+			rs = expand_splits(sv, st);
 		if (rs)
 			return rs;
 	}
@@ -302,28 +191,30 @@ static rad_status initial_links(rad_solver *sv, hr_state *st)
 	const rad_scene *s = sv->scene;
 	rad_status rs = RAD_OK;
 	for (uint32_t l = 0; l < s->nlights && !rs; l++)
-		rs = vec_push(sv, &st->cand, RAD_TAG_CLUSTER, l | RAD_TAG_LIGHT,
-		              0);
+		rs = push_pair(sv, &st->wave.todo, RAD_TAG_CLUSTER,
+		               l | RAD_TAG_LIGHT, 0);
 	if (rs)
 		return rs;
 	if (sv->opt.clustering) {
-		rs = vec_push(sv, &st->cand, RAD_TAG_CLUSTER, RAD_TAG_CLUSTER,
-		              0);
+		rs = push_pair(sv, &st->wave.todo, RAD_TAG_CLUSTER,
+		               RAD_TAG_CLUSTER, 0);
 		return rs ? rs : refine_waves(sv, st);
 	}
 	/* Without clusters, lights link to every polygon directly. */
-	st->cand.n = 0;
+	st->wave.todo.n = 0;
 	uint32_t n = s->npolys;
 	for (uint32_t i = 0; i < n && !rs; i++)
 		for (uint32_t l = 0; l < s->nlights && !rs; l++)
-			rs = vec_push(sv, &st->cand, i, l | RAD_TAG_LIGHT, 0);
+			rs = push_pair(sv, &st->wave.todo, i, l | RAD_TAG_LIGHT,
+			               0);
 	if (!rs)
 		rs = refine_waves(sv, st);
 	for (uint32_t i = 0; i < n && !rs; i++) {
 		for (uint32_t j = 0; j < n && !rs; j++)
 			if (i != j)
-				rs = vec_push(sv, &st->cand, i, j, 0);
-		if (!rs && (st->cand.n >= HR_BLOCK_PAIRS || i + 1 == n)) {
+				rs = push_pair(sv, &st->wave.todo, i, j, 0);
+		if (!rs &&
+		    (st->wave.todo.n >= WAVE_BLOCK_PAIRS || i + 1 == n)) {
 			rs = refine_waves(sv, st);
 			rad_solver_progress(sv, 0.8 * (i + 1) / n);
 		}
@@ -337,8 +228,8 @@ static rad_status requeue(rad_solver *sv, hr_state *st, uint32_t *prev,
 {
 	uint32_t id = *prev;
 	rad_link *l = rad_link_at(&sv->h, id);
-	rad_status rs =
-	        vec_push(sv, &st->split, l->rcv, l->src, (uint32_t)rcv_only);
+	rad_status rs = push_pair(sv, &st->wave.held, l->rcv, l->src,
+	                          (uint32_t)rcv_only);
 	if (rs)
 		return rs;
 	*prev = l->next;
@@ -413,7 +304,7 @@ static rad_status retest_list(rad_solver *sv, hr_state *st, uint32_t *head,
 		/* A zero link (cluster pair whose samples saw nothing) is
 		 * judged on its bound: its sources may have lit up. */
 		double f = l->ff > 0 ? l->ff : node_ff_bound(h, l->rcv, l->src);
-		if (pair_refinable(h, l->rcv, l->src) &&
+		if (wave_refinable(h, l->rcv, l->src) &&
 		    oracle(sv, l->rcv, l->src, f) > sv->opt.eps) {
 			rad_status rs = requeue(sv, st, prev, 0);
 			if (rs)
@@ -814,11 +705,7 @@ static rad_status hr_init(rad_solver *sv, rad_error *err)
 {
 	hr_state *st =
 	        rad_mem_calloc(&sv->mem, RAD_MEM_SCRATCH, 1, sizeof(*st));
-	if (st)
-		st->rays = rad_mem_calloc(&sv->mem, RAD_MEM_SCRATCH,
-		                          (size_t)rad_par_threads(sv->par),
-		                          sizeof(uint64_t));
-	if (!st || !st->rays) {
+	if (!st || wave_init(sv, &st->wave, sizeof(hr_pair))) {
 		if (st)
 			rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, st);
 		return rad_fail(err, RAD_ERR_NOMEM, "hr: out of memory");
@@ -829,11 +716,7 @@ static rad_status hr_init(rad_solver *sv, rad_error *err)
 
 static void release_scratch(rad_solver *sv, hr_state *st)
 {
-	vec_free(sv, &st->cand);
-	vec_free(sv, &st->split);
-	rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, st->eval);
-	st->eval = NULL;
-	st->eval_cap = 0;
+	wave_release(sv, &st->wave);
 	rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, st->vals);
 	st->vals = NULL;
 	st->vals_cap = 0;
@@ -843,9 +726,7 @@ static rad_status hr_step(rad_solver *sv, rad_error *err)
 {
 	hr_state *st = sv->impl;
 	rad_hier *h = &sv->h;
-	int threads = rad_par_threads(sv->par);
-	memset(st->rays, 0, (size_t)threads * sizeof(uint64_t));
-	st->force_store = 0;
+	wave_step_begin(sv, &st->wave);
 	rad_status rs = RAD_OK;
 	if (!st->started)
 		rs = initial_links(sv, st);
@@ -854,7 +735,7 @@ static rad_status hr_step(rad_solver *sv, rad_error *err)
 	st->started = 1;
 	release_scratch(sv, st);
 	if (rs)
-		return node_refine_failed(sv, rs, err);
+		return wave_failed(sv, rs, err);
 	rad_solver_progress(sv, 0.8);
 	/* The row sums' payload only once it is needed (node_extra). */
 	gather_job g = {h, {1, 1, 1}, NULL, NULL, NULL};
@@ -872,7 +753,7 @@ static rad_status hr_step(rad_solver *sv, rad_error *err)
 	if (nomem || gather_bounded(sv, &g) < 0) {
 		rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, g.xe);
 		rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, g.xc);
-		return node_refine_failed(sv, RAD_ERR_NOMEM, err);
+		return wave_failed(sv, RAD_ERR_NOMEM, err);
 	}
 	rad_solver_progress(sv, 0.95);
 	int first = sv->stats.iteration == 0;
@@ -910,14 +791,14 @@ static rad_status hr_step(rad_solver *sv, rad_error *err)
 	}
 	st->last_r = r;
 	count_links(sv);
-	return node_step_end(sv, st->rays, st->force_store, err);
+	return wave_step_end(sv, &st->wave, err);
 }
 
 static void hr_destroy(rad_solver *sv)
 {
 	hr_state *st = sv->impl;
 	release_scratch(sv, st);
-	rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, st->rays);
+	wave_destroy(sv, &st->wave);
 	rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, st);
 	sv->impl = NULL;
 }

@@ -21,14 +21,13 @@
  *
  * RefineAndGather, in chunks.  The recursive walk of fig. 4.2 runs over
  * a work list of items (receiver, source, record) used as a stack, so
- * that it stays about as short as the walk is deep.  It is parallel and
- * deterministic like hr.c: the top chunk of the list is judged by the
- * worker threads (oracle on dB with the stored form factor, or on an
- * estimate for a new pair; shadow rays for a new pair at its level), each
- * item into its own slot; one thread then applies the chunk in order: an
- * item at its level adds F dB to its receiver, an item to refine pushes
- * its children -- the stored ones of a passive link, or new ones
- * (elements split on demand, by this thread only).
+ * that it stays about as short as the walk is deep.  Its waves (wave.c)
+ * are the top chunks of the list: the worker threads judge them (oracle
+ * on dB with the stored form factor, or on an estimate for a new pair;
+ * shadow rays for a new pair at its level), and one thread applies them
+ * in order: an item at its level adds F dB to its receiver, an item to
+ * refine pushes its children -- the stored ones of a passive link, or new
+ * ones.
  *
  * What happens "on return" in fig. 4.2 -- form factors from the children,
  * which links to keep -- needs the children's results, so it is a second,
@@ -67,11 +66,7 @@
 #include <string.h>
 
 #include "err.h"
-#include "hr_nodes.h"
-#include "solver.h"
-
-/* What judging an item decided. */
-enum { ACT_DROP = 0, ACT_LEVEL, ACT_SPLIT, ACT_SPLIT_RCV };
+#include "wave.h"
 
 /* rmb's own link flags, beside RAD_LINK_PASSIVE and RAD_LINK_SPLIT_SRC. */
 enum {
@@ -87,16 +82,6 @@ typedef struct rmb_item {
 	float w;       /* transient: its weight in anc's form factor */
 } rmb_item;
 
-typedef struct rmb_eval {
-	float ff, spread;
-	uint8_t action;
-} rmb_eval;
-
-typedef struct rmb_vec { /* growable array of items, SCRATCH */
-	rmb_item *v;
-	size_t n, cap;
-} rmb_vec;
-
 /* Open-addressing set of 64-bit pair keys (study statistics, STUDY). */
 typedef struct rmb_set {
 	uint64_t *keys; /* 0 = empty slot; keys are stored + 1 */
@@ -104,10 +89,7 @@ typedef struct rmb_set {
 } rmb_set;
 
 typedef struct rmb_state {
-	rmb_vec cand, next; /* the work list (a stack), the chunk judged */
-	rmb_eval *eval;
-	size_t eval_cap;
-	uint64_t *rays; /* per-thread ray counters */
+	rad_wave wave; /* items: rmb_item; its todo is the work list */
 	uint32_t *roots;
 	size_t nroots, cap_roots; /* stored root links, LINKS */
 	uint8_t *black;           /* per cluster id: contents all rho = 0 */
@@ -115,7 +97,6 @@ typedef struct rmb_state {
 	float *rhomax;            /* per cluster id: largest reflectance */
 	uint32_t ncl;
 	uint32_t iter;    /* iterations done */
-	int force_store;  /* cancelled: keep pairs at their level */
 	double mean_dB;   /* area-mean photopic dB after the last update */
 	double mean_B;    /* ... and B */
 	double chg[3][3]; /* sum A |dB| per channel, last three steps */
@@ -132,26 +113,13 @@ typedef struct rmb_state {
 	size_t cap_cut, cap_err, cap_emax;
 } rmb_state;
 
-/* Pairs of polygons handed to one walk without clustering. */
-#define RMB_BLOCK_PAIRS (1u << 20)
-
 /* ------------------------------------------------------------- helpers */
 
-static rad_status vec_push(rad_solver *sv, rmb_vec *v, rmb_item it)
+/* Push an item on the work list. */
+static rad_status push_item(rad_solver *sv, rmb_item it)
 {
-	rmb_item *p = rad_mem_grow(&sv->mem, RAD_MEM_SCRATCH, v->v, &v->cap,
-	                           v->n + 1, sizeof(*p), 1024);
-	if (!p)
-		return RAD_ERR_NOMEM;
-	v->v = p;
-	v->v[v->n++] = it;
-	return RAD_OK;
-}
-
-static void vec_free(rad_solver *sv, rmb_vec *v)
-{
-	rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, v->v);
-	memset(v, 0, sizeof(*v));
+	rmb_state *st = sv->impl;
+	return wave_push(sv, &st->wave, &st->wave.todo, &it);
 }
 
 static uint64_t pair_key(uint32_t r, uint32_t s)
@@ -371,92 +339,59 @@ static int rcv_too_coarse(const rad_solver *sv, uint32_t r, double e)
 	return st->cut[r] > 0 && e >= st->cut[r];
 }
 
-static int pair_refinable(const rad_hier *h, uint32_t r, uint32_t s)
-{
-	return node_splittable(h, r) || node_splittable(h, s);
-}
-
 /* ------------------------------------------------------------- judging */
 
 /*
- * Judge one item: ACT_LEVEL with its form factor when the link may carry
- * its transfer at this level, ACT_SPLIT(_RCV) to refine, ACT_DROP when
- * nothing passes.  Pure computation: runs on the worker threads.
+ * Judge one item: WAVE_LEVEL with its form factor when the link may carry
+ * its transfer at this level, WAVE_SPLIT(_RCV) to refine, WAVE_DROP when
+ * nothing passes.
  */
-static uint8_t evaluate(rad_solver *sv, const rmb_item *it, float *ff,
-                        float *spread, uint64_t *rays)
+static uint8_t judge(rad_solver *sv, const void *item, int may_split,
+                     wave_verdict *out, uint64_t *rays)
 {
 	const rad_hier *h = &sv->h;
-	const rmb_state *st = sv->impl;
+	const rmb_item *it = item;
 	uint32_t r = it->rcv, s = it->src;
 	const rad_link *l =
 	        it->link != RAD_NONE ? rad_link_at(h, it->link) : NULL;
 	int fresh = !l || (l->flags & L_NEW);
 	int passive = l && !fresh && l->child != RAD_NONE;
-	int may_split = !st->force_store;
 	double b = node_luma_dB(sv, s);
-	*ff = *spread = 0;
 	if (passive && !may_split)
-		return ACT_SPLIT; /* cancelled: walk what exists, make nothing
-		                   */
+		return WAVE_SPLIT; /* cancelled: walk what exists, make nothing
+		                    */
 	if (r == s) { /* a cluster's self-link: opened up while it emits */
 		if (!node_is_cluster(r))
-			return ACT_DROP;
+			return WAVE_DROP;
 		if (b > 0 && may_split)
-			return ACT_SPLIT;
-		*ff = fresh ? 0 : l->ff;
-		return ACT_LEVEL;
+			return WAVE_SPLIT;
+		out->ff = fresh ? 0 : l->ff;
+		return WAVE_LEVEL;
 	}
 	if (node_black(sv, r) || !node_facing(h, r, s))
-		return ACT_DROP;
+		return WAVE_DROP;
 	double f = !fresh ? (l->ff > 0 ? l->ff : node_ff_bound(h, r, s))
 	                  : node_ff_estimate(h, r, s);
-	if (may_split && pair_refinable(h, r, s) &&
+	if (may_split && wave_refinable(h, r, s) &&
 	    node_oracle(sv, r, s, b, f) > sv->opt.eps)
-		return ACT_SPLIT;
+		return WAVE_SPLIT;
 	int rcv_split = may_split && node_splittable(h, r);
 	if (!fresh) {
 		if (rcv_split &&
 		    rcv_too_coarse(sv, r, link_err(sv, b, l->spread)))
-			return ACT_SPLIT_RCV;
-		*ff = l->ff;
-		*spread = l->spread;
-		return ACT_LEVEL;
+			return WAVE_SPLIT_RCV;
+		out->ff = l->ff;
+		out->spread = l->spread;
+		return WAVE_LEVEL;
 	}
 	/* A pair that cannot be kept and carries nothing needs no rays. */
 	if (b == 0 && (node_black(sv, s) || !l))
-		return ACT_LEVEL;
+		return WAVE_LEVEL;
 	double sp = 0;
 	f = node_ff(sv, r, s, rays, &sp);
 	if (rcv_split && rcv_too_coarse(sv, r, link_err(sv, b, sp)))
-		return ACT_SPLIT_RCV;
-	/* As in hr.c: cluster samples seeing nothing prove nothing; keep a
-	 * zero link, judged on the box-gap bound, unless it fails now. */
-	if (!(f > 0) && (node_is_cluster(r) || node_is_cluster(s))) {
-		if (may_split &&
-		    node_oracle(sv, r, s, b, node_ff_bound(h, r, s)) >
-		            sv->opt.eps)
-			return ACT_SPLIT;
-		return ACT_LEVEL;
-	}
-	*ff = (float)f;
-	*spread = (float)sp;
-	return f > 0 ? ACT_LEVEL : ACT_DROP;
-}
-
-typedef struct eval_job {
-	rad_solver *sv;
-	rmb_state *st;
-} eval_job;
-
-static void eval_range(void *ud, size_t b, size_t e, int thread)
-{
-	eval_job *j = ud;
-	for (size_t i = b; i < e; i++) {
-		rmb_eval *out = &j->st->eval[i];
-		out->action = evaluate(j->sv, &j->st->next.v[i], &out->ff,
-		                       &out->spread, &j->st->rays[thread]);
-	}
+		return WAVE_SPLIT_RCV;
+	return wave_at_level(sv, r, s, b, f, sp, may_split, out);
 }
 
 /* ------------------------------------------------------------ applying */
@@ -528,8 +463,7 @@ static int coarse_next(const rad_solver *sv, uint32_t r, uint32_t s, double f)
 }
 
 /* Refine an item: its children go to the next wave. */
-static rad_status split_item(rad_solver *sv, rmb_state *st, const rmb_item *it,
-                             int rcv_only)
+static rad_status split_item(rad_solver *sv, const rmb_item *it, int rcv_only)
 {
 	rad_hier *h = &sv->h;
 	rad_link *l = it->link != RAD_NONE ? rad_link_at(h, it->link) : NULL;
@@ -539,44 +473,28 @@ static rad_status split_item(rad_solver *sv, rmb_state *st, const rmb_item *it,
 			const rad_link *c = rad_link_at(h, l->child + k);
 			rmb_item ci = {c->rcv, c->src, l->child + k, RAD_NONE,
 			               0};
-			rad_status rs = vec_push(sv, &st->cand, ci);
+			rad_status rs = push_item(sv, ci);
 			if (rs)
 				return rs;
 		}
 		return RAD_OK;
 	}
-	uint32_t kr[4] = {it->rcv}, ks[4] = {it->src};
-	int nr = 1, ns = 1;
-	int side = node_split_side(h, it->rcv, it->src, rcv_only);
-	if (side & 1)
-		nr = node_children(h, it->rcv, kr);
-	if (side == 3) {
-		ns = nr;
-		memcpy(ks, kr, sizeof(ks));
-	} else if (side & 2) {
-		ns = node_children(h, it->src, ks);
-	}
-	if (nr == 0 || ns == 0)
+	uint32_t kr[WAVE_KIDS], ks[WAVE_KIDS];
+	int side, nk = wave_children(h, it->rcv, it->src, rcv_only, kr, ks,
+	                             &side);
+	if (nk < 0)
 		return RAD_ERR_NOMEM;
 	/* With a record and a reflecting source the children may be kept:
 	 * make them as records now.  Otherwise they are transient. */
-	rmb_item kid[16];
+	rmb_item kid[WAVE_KIDS];
 	int n = 0;
-	for (int a = 0; a < nr; a++) {
-		if (node_black(sv, kr[a]))
+	for (int k = 0; k < nk; k++) {
+		if (node_black(sv, kr[k]))
 			continue; /* reflects nothing: no transfer to make */
-		for (int b = 0; b < ns; b++) {
-			if (kr[a] == ks[b] && !node_is_cluster(kr[a]))
-				continue; /* planar: F = 0 */
-			if (kr[a] != ks[b] && !node_facing(h, kr[a], ks[b]))
-				continue; /* no record for what cannot carry */
-			kid[n].rcv = kr[a];
-			kid[n].src = ks[b];
-			kid[n].link = RAD_NONE;
-			kid[n].anc = RAD_NONE;
-			kid[n].w = 0;
-			n++;
-		}
+		if (kr[k] != ks[k] && !node_facing(h, kr[k], ks[k]))
+			continue; /* no record for what cannot carry */
+		rmb_item c = {kr[k], ks[k], RAD_NONE, RAD_NONE, 0};
+		kid[n++] = c;
 	}
 	if (n == 0) {
 		if (l) /* nothing below: carries nothing */
@@ -622,7 +540,7 @@ static rad_status split_item(rad_solver *sv, rmb_state *st, const rmb_item *it,
 		}
 	}
 	for (int k = 0; k < n; k++) {
-		rad_status rs = vec_push(sv, &st->cand, kid[k]);
+		rad_status rs = push_item(sv, kid[k]);
 		if (rs)
 			return rs;
 	}
@@ -658,75 +576,50 @@ static void free_children(rad_solver *sv, rmb_state *st, uint32_t id,
  * work list stays short (it is a stack: depth x chunk x children). */
 #define RMB_CHUNK 4096
 
-/*
- * Judge the top chunk of the work list in parallel, then apply it in
- * order; children are pushed on the list.
- */
-static rad_status run_chunk(rad_solver *sv, rmb_state *st)
+/* Apply an item's verdict: gather it at its level, or refine it (its
+ * children are pushed on the work list). */
+static rad_status apply(rad_solver *sv, const void *item, const wave_verdict *v)
 {
+	rmb_state *st = sv->impl;
 	rad_hier *h = &sv->h;
-	size_t n = st->cand.n < RMB_CHUNK ? st->cand.n : RMB_CHUNK;
-	rmb_item *top = rad_mem_grow(&sv->mem, RAD_MEM_SCRATCH, st->next.v,
-	                             &st->next.cap, n, sizeof(*top), 1024);
-	if (!top)
-		return RAD_ERR_NOMEM;
-	st->cand.n -= n;
-	memcpy(top, st->cand.v + st->cand.n, n * sizeof(*top));
-	st->next.v = top;
-	st->next.n = n;
-	if (n > st->eval_cap) {
-		rmb_eval *e = rad_mem_realloc(&sv->mem, RAD_MEM_SCRATCH,
-		                              st->eval, n * sizeof(*e));
-		if (!e)
-			return RAD_ERR_NOMEM;
-		st->eval = e;
-		st->eval_cap = n;
-	}
-	eval_job job = {sv, st};
-	rad_par_for(sv->par, n, 16, eval_range, &job);
-	for (size_t i = 0; i < n; i++) {
-		const rmb_item *it = &st->next.v[i];
-		const rmb_eval *ev = &st->eval[i];
-		rad_link *l =
-		        it->link != RAD_NONE ? rad_link_at(h, it->link) : NULL;
-		rad_status rs = RAD_OK;
-		switch (ev->action) {
-		case ACT_DROP:
-			if (l)
-				l->flags |= L_DEAD;
-			break;
-		case ACT_LEVEL:
-			rs = gather(sv, it->rcv, it->src, ev->ff, ev->spread,
-			            l == NULL);
-			if (l && (l->flags & L_NEW)) {
-				l->ff = ev->ff;
-				l->spread = ev->spread;
-			} else if (l && l->child != RAD_NONE) {
-				/* A coarser level will do: the subtree goes
-				 * now, so that this walk reuses its records. */
-				free_children(sv, st, it->link, &rs);
-			} else if (!l && it->anc != RAD_NONE) {
-				rad_link_at(h, it->anc)->ff += it->w * ev->ff;
-			}
-			break;
-		default:
-			rs = split_item(sv, st, it,
-			                ev->action == ACT_SPLIT_RCV);
+	const rmb_item *it = item;
+	rad_link *l = it->link != RAD_NONE ? rad_link_at(h, it->link) : NULL;
+	rad_status rs = RAD_OK;
+	switch (v->action) {
+	case WAVE_DROP:
+		if (l)
+			l->flags |= L_DEAD;
+		break;
+	case WAVE_LEVEL:
+		rs = gather(sv, it->rcv, it->src, v->ff, v->spread, l == NULL);
+		if (l && (l->flags & L_NEW)) {
+			l->ff = v->ff;
+			l->spread = v->spread;
+		} else if (l && l->child != RAD_NONE) {
+			/* A coarser level will do: the subtree goes now, so
+			 * that this walk reuses its records. */
+			free_children(sv, st, it->link, &rs);
+		} else if (!l && it->anc != RAD_NONE) {
+			rad_link_at(h, it->anc)->ff += it->w * v->ff;
 		}
-		if (rs)
-			return rs;
+		break;
+	default:
+		rs = split_item(sv, it, v->action == WAVE_SPLIT_RCV);
 	}
-	return RAD_OK;
+	return rs;
 }
 
+/* Run the work list to its end, a wave from its top at a time. */
 static rad_status run_waves(rad_solver *sv, rmb_state *st)
 {
-	while (st->cand.n > 0) {
-		rad_status rs = run_chunk(sv, st);
+	rad_wave *w = &st->wave;
+	while (w->todo.n > 0) {
+		size_t n = w->todo.n < RMB_CHUNK ? w->todo.n : RMB_CHUNK;
+		rad_status rs = wave_take_top(sv, w, n);
+		if (!rs)
+			rs = wave_run(sv, w, w->held.v, n, judge, apply);
 		if (rs)
 			return rs;
-		if (rad_solver_cancelled(sv))
-			st->force_store = 1; /* finish at the current level */
 	}
 	return RAD_OK;
 }
@@ -828,7 +721,7 @@ static rad_status root_push(rad_solver *sv, rmb_state *st, uint32_t id)
 }
 
 /*
- * Walk the items in st->cand (roots of link trees), then settle the
+ * Walk the items in the work list (roots of link trees), then settle the
  * records among them; the ones kept are appended to st->roots.
  */
 static rad_status walk_roots(rad_solver *sv, rmb_state *st, uint32_t *ids,
@@ -851,8 +744,7 @@ typedef struct id_vec {
 } id_vec;
 
 /* A new root record (rcv <- src), or a transient item for a pure source. */
-static rad_status new_root(rad_solver *sv, rmb_state *st, uint32_t r,
-                           uint32_t s, id_vec *ids)
+static rad_status new_root(rad_solver *sv, uint32_t r, uint32_t s, id_vec *ids)
 {
 	rmb_item it = {r, s, RAD_NONE, RAD_NONE, 0};
 	if (node_black(sv, r) && r != s)
@@ -870,7 +762,7 @@ static rad_status new_root(rad_solver *sv, rmb_state *st, uint32_t r,
 		rad_link_at(&sv->h, it.link)->flags = L_NEW;
 		ids->v[ids->n++] = it.link;
 	}
-	return vec_push(sv, &st->cand, it);
+	return push_item(sv, it);
 }
 
 static rad_status first_walk(rad_solver *sv, rmb_state *st)
@@ -880,10 +772,10 @@ static rad_status first_walk(rad_solver *sv, rmb_state *st)
 	rad_status rs = RAD_OK;
 	if (sv->opt.clustering) {
 		for (uint32_t l = 0; l < s->nlights && !rs; l++)
-			rs = new_root(sv, st, RAD_TAG_CLUSTER,
-			              l | RAD_TAG_LIGHT, &ids);
+			rs = new_root(sv, RAD_TAG_CLUSTER, l | RAD_TAG_LIGHT,
+			              &ids);
 		if (!rs)
-			rs = new_root(sv, st, RAD_TAG_CLUSTER, RAD_TAG_CLUSTER,
+			rs = new_root(sv, RAD_TAG_CLUSTER, RAD_TAG_CLUSTER,
 			              &ids);
 		if (!rs)
 			rs = walk_roots(sv, st, ids.v, ids.n);
@@ -892,13 +784,12 @@ static rad_status first_walk(rad_solver *sv, rmb_state *st)
 		uint32_t n = s->npolys;
 		for (uint32_t i = 0; i < n && !rs; i++) {
 			for (uint32_t l = 0; l < s->nlights && !rs; l++)
-				rs = new_root(sv, st, i, l | RAD_TAG_LIGHT,
-				              &ids);
+				rs = new_root(sv, i, l | RAD_TAG_LIGHT, &ids);
 			for (uint32_t j = 0; j < n && !rs; j++)
 				if (i != j)
-					rs = new_root(sv, st, i, j, &ids);
-			if (!rs &&
-			    (st->cand.n >= RMB_BLOCK_PAIRS || i + 1 == n)) {
+					rs = new_root(sv, i, j, &ids);
+			if (!rs && (st->wave.todo.n >= WAVE_BLOCK_PAIRS ||
+			            i + 1 == n)) {
 				rs = walk_roots(sv, st, ids.v, ids.n);
 				ids.n = 0;
 				rad_solver_progress(sv, 0.8 * (i + 1) / n);
@@ -917,12 +808,12 @@ static rad_status next_walk(rad_solver *sv, rmb_state *st)
 	st->roots = NULL;
 	st->nroots = st->cap_roots = 0;
 	rad_status rs = RAD_OK;
-	for (size_t b = 0; b < n && !rs; b += RMB_BLOCK_PAIRS) {
-		size_t e = b + RMB_BLOCK_PAIRS < n ? b + RMB_BLOCK_PAIRS : n;
+	for (size_t b = 0; b < n && !rs; b += WAVE_BLOCK_PAIRS) {
+		size_t e = b + WAVE_BLOCK_PAIRS < n ? b + WAVE_BLOCK_PAIRS : n;
 		for (size_t i = b; i < e && !rs; i++) {
 			const rad_link *l = rad_link_at(&sv->h, old[i]);
 			rmb_item it = {l->rcv, l->src, old[i], RAD_NONE, 0};
-			rs = vec_push(sv, &st->cand, it);
+			rs = push_item(sv, it);
 		}
 		if (!rs)
 			rs = walk_roots(sv, st, old + b, e - b);
@@ -1159,16 +1050,14 @@ static rad_status rmb_init(rad_solver *sv, rad_error *err)
 	if (!st)
 		return rad_fail(err, RAD_ERR_NOMEM, "rmb: out of memory");
 	sv->impl = st;
-	st->rays = rad_mem_calloc(&sv->mem, RAD_MEM_SCRATCH,
-	                          (size_t)rad_par_threads(sv->par),
-	                          sizeof(uint64_t));
+	rad_status rs = wave_init(sv, &st->wave, sizeof(rmb_item));
 	st->ncl = sv->h.clusters.count;
 	st->black = rad_mem_calloc(&sv->mem, RAD_MEM_ELEM_CLUSTER, st->ncl, 1);
 	st->arefl = rad_mem_calloc(&sv->mem, RAD_MEM_ELEM_CLUSTER, st->ncl,
 	                           sizeof(float));
 	st->rhomax = rad_mem_calloc(&sv->mem, RAD_MEM_ELEM_CLUSTER, st->ncl,
 	                            sizeof(float));
-	if (!st->rays || !st->black || !st->arefl || !st->rhomax)
+	if (rs || !st->black || !st->arefl || !st->rhomax)
 		return rad_fail(err, RAD_ERR_NOMEM, "rmb: out of memory");
 	mark_black(sv, 0);
 	/* B = E everywhere, then the initial pull: dB = B on every node. */
@@ -1183,11 +1072,7 @@ static rad_status rmb_init(rad_solver *sv, rad_error *err)
 
 static void release_scratch(rad_solver *sv, rmb_state *st)
 {
-	vec_free(sv, &st->cand);
-	vec_free(sv, &st->next);
-	rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, st->eval);
-	st->eval = NULL;
-	st->eval_cap = 0;
+	wave_release(sv, &st->wave);
 	rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, st->err);
 	rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, st->emax);
 	st->err = st->emax = NULL;
@@ -1198,9 +1083,7 @@ static rad_status rmb_step(rad_solver *sv, rad_error *err)
 {
 	rmb_state *st = sv->impl;
 	rad_hier *h = &sv->h;
-	int threads = rad_par_threads(sv->par);
-	memset(st->rays, 0, (size_t)threads * sizeof(uint64_t));
-	st->force_store = 0;
+	wave_step_begin(sv, &st->wave);
 	zero_I(h, RAD_TAG_CLUSTER);
 	for (uint32_t i = 0; i < sv->scene->npolys; i++)
 		zero_I(h, i);
@@ -1209,7 +1092,7 @@ static rad_status rmb_step(rad_solver *sv, rad_error *err)
 		rs = mark_cuts(sv, st, i, 0);
 	release_scratch(sv, st);
 	if (rs)
-		return node_refine_failed(sv, rs, err);
+		return wave_failed(sv, rs, err);
 	if (st->iter > 0)
 		energy_bound(sv);
 	rad_solver_progress(sv, 0.9);
@@ -1230,7 +1113,7 @@ static rad_status rmb_step(rad_solver *sv, rad_error *err)
 	rad_solver_set_residual(sv, r);
 	tail_jump(sv, st);
 	count_links(sv);
-	return node_step_end(sv, st->rays, st->force_store, err);
+	return wave_step_end(sv, &st->wave, err);
 }
 
 static void rmb_destroy(rad_solver *sv)
@@ -1239,7 +1122,7 @@ static void rmb_destroy(rad_solver *sv)
 	if (!st)
 		return;
 	release_scratch(sv, st);
-	rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, st->rays);
+	wave_destroy(sv, &st->wave);
 	rad_mem_free(&sv->mem, RAD_MEM_LINKS, st->roots);
 	rad_mem_free(&sv->mem, RAD_MEM_ELEM_CLUSTER, st->black);
 	rad_mem_free(&sv->mem, RAD_MEM_ELEM_CLUSTER, st->arefl);
