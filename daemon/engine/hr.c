@@ -7,525 +7,17 @@
  * (B = E + rho I), pull radiosity back up.
  *
  * DESIGN
- * Refinement works in waves so that it is parallel and deterministic.  A
- * wave is a list of candidate pairs (receiver, source).  Evaluating a
- * candidate -- oracle on an estimated form factor, then the accurate form
- * factor with shadow rays for those kept -- is pure computation written to
- * the candidate's own slot, done by the worker threads.  Applying the
- * results is serial, in wave order: kept candidates become links (prepended
- * to their receiver's list), refused ones are split -- elements made on
- * demand, always by this one thread -- into the children pairs of the next
- * wave.  Element ids, link order and sums are therefore the same for any
- * thread count, and so is every result.
- *
- * Initial links: with clustering, the root cluster's self-link plus one
- * link from every light to the root; without, every facing pair of input
- * polygons (quadratic: processed in row blocks to bound scratch memory)
- * and every light to every polygon.  Later iterations re-test every stored
- * link against the oracle with its stored form factor and replace the ones
- * that fail by their children (classic HR keeps no passive links).
- *
- * Oracle values are fractions of the scene's total source flux (BFA),
- * of its mean exitance (BF), or plain form factors (F); a link is split
- * while its value exceeds eps and one of its ends can be split.
- *
- * Energy alone picks the level of the source, not of the receiver: a leaf
- * receives every link of its ancestors, each averaged over a larger
- * region, and near corners those errors add up.  So each link also keeps
- * its spread over the receiver's points, and the re-test walks every
- * quadtree top-down summing the links' error bounds (half the spread,
- * times the source's radiosity); where the sum passes `variation` times
- * the mean radiosity (or, in a dimmer place, times the receiver's own
- * irradiance: local_limit), the worst links move to the children.
- *
- * A cluster pair whose few sample points see nothing of each other is not
- * proof of zero transfer: it is kept as a zero link and re-tested on an
- * upper bound of F from the gap between the two boxes.
+ * The links come from hr_refine.c: refined in the first step, re-tested
+ * in every later one until the iteration is seen to diverge (hr_step).
+ * This file gathers over them within two bounds (the energy bound and the
+ * row sums), pushes, updates the leaves and pulls, and jumps over the
+ * tail of slowly converging iterations.
  */
 #include <math.h>
-#include <stdlib.h>
 #include <string.h>
 
 #include "err.h"
-#include "hr_nodes.h"
-#include "solver.h"
-
-/* What evaluating a candidate decided. */
-enum { ACT_DROP = 0, ACT_STORE, ACT_SPLIT, ACT_SPLIT_RCV };
-
-typedef struct hr_pair {
-	uint32_t rcv, src;
-	uint32_t rcv_only; /* split the receiver, not the larger end */
-} hr_pair;
-
-typedef struct hr_eval {
-	float ff, spread;
-	uint8_t action;
-} hr_eval;
-
-typedef struct hr_vec { /* growable array of pairs, SCRATCH */
-	hr_pair *v;
-	size_t n, cap;
-} hr_vec;
-
-typedef struct hr_state {
-	hr_vec cand, split; /* current wave, pairs to split */
-	hr_eval *eval;      /* one per candidate */
-	size_t eval_cap;
-	uint64_t *rays;   /* per-thread ray counters */
-	int started;      /* initial links made */
-	int force_store;  /* cancelled: keep pairs at their level */
-	double mean_B;    /* area-mean photopic radiosity of the last step */
-	double last_r;    /* residual of the last step */
-	int frozen;       /* refinement stopped (hr_step) */
-	int clip;         /* leaves' gain held below 1 (node_extra) */
-	double chg[3][3]; /* sum A |dB| per channel, last three steps */
-	double q_jump;    /* rate of the last extrapolation (tail) */
-	int since;        /* steps since it (or since the start) */
-	double *vals;     /* scratch for budget_cut */
-	size_t vals_cap;
-} hr_state;
-
-/* Rows of initial polygon pairs evaluated at once without clustering. */
-#define HR_BLOCK_PAIRS (1u << 20)
-
-static rad_status vec_push(rad_solver *sv, hr_vec *v, uint32_t r, uint32_t s,
-                           uint32_t rcv_only)
-{
-	hr_pair *p = rad_mem_grow(&sv->mem, RAD_MEM_SCRATCH, v->v, &v->cap,
-	                          v->n + 1, sizeof(*p), 1024);
-	if (!p)
-		return RAD_ERR_NOMEM;
-	v->v = p;
-	v->v[v->n].rcv = r;
-	v->v[v->n].src = s;
-	v->v[v->n].rcv_only = rcv_only;
-	v->n++;
-	return RAD_OK;
-}
-
-static void vec_free(rad_solver *sv, hr_vec *v)
-{
-	rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, v->v);
-	memset(v, 0, sizeof(*v));
-}
-
-/* Oracle value of the link on the source's full radiosity. */
-static double oracle(const rad_solver *sv, uint32_t rcv, uint32_t src, double f)
-{
-	return node_oracle(sv, rcv, src, node_luma_B(&sv->h, src), f);
-}
-
-/*
- * Receiver variation test: the irradiance a link brings varies over its
- * receiver by luma(B) x spread.  Split the receiver while that exceeds
- * `variation` times the scene's mean radiosity (last iteration's, or the
- * mean exitance before any light has bounced).
- */
-static double spread_limit(const rad_solver *sv)
-{
-	const hr_state *st = sv->impl;
-	double bref = fmax(st->mean_B, sv->flux_scale / sv->scene->total_area);
-	return sv->opt.variation * bref;
-}
-
-static int spread_fails(const rad_solver *sv, uint32_t src, double spread)
-{
-	return 0.5 * node_luma_B(&sv->h, src) * spread > spread_limit(sv);
-}
-
-static int pair_refinable(const rad_hier *h, uint32_t r, uint32_t s)
-{
-	return node_splittable(h, r) || node_splittable(h, s);
-}
-
-/*
- * Decide a candidate.  Split while the energy it would carry (oracle on the
- * estimated form factor) is above eps; once at that level, compute the real
- * form factor, and split the receiver while the transfer still varies over
- * it by more than eps (oracle on the spread): that keeps each leaf's total
- * form factor right near corners and shadow edges, which the energy test
- * alone does not (it decides the level of the source, not of the receiver).
- */
-static uint8_t evaluate(rad_solver *sv, uint32_t r, uint32_t s, float *ff,
-                        float *spread, uint64_t *rays)
-{
-	const rad_hier *h = &sv->h;
-	if (r == s) /* a cluster's self-link: always opened up */
-		return node_is_cluster(r) ? ACT_SPLIT : ACT_DROP;
-	if (!node_facing(h, r, s))
-		return ACT_DROP;
-	hr_state *st = sv->impl;
-	int may_split = !st->force_store;
-	if (may_split && pair_refinable(h, r, s) &&
-	    oracle(sv, r, s, node_ff_estimate(h, r, s)) > sv->opt.eps)
-		return ACT_SPLIT;
-	double sp = 0, f = node_ff(sv, r, s, rays, &sp);
-	if (may_split && node_splittable(h, r) && spread_fails(sv, s, sp))
-		return ACT_SPLIT_RCV;
-	/* A cluster's few sample points seeing nothing of the other end
-	 * prove nothing about its contents.  While the pair could carry
-	 * little even at its bound (box gap), keep it as a zero link that
-	 * later iterations re-test on that bound (see retest_list); else
-	 * look closer now.  Between
-	 * surfaces the samples cover both ends, and an all-blocked answer
-	 * has already been re-checked with other points
-	 * (rad_ff_patch_spread): zero means zero. */
-	if (!(f > 0) && (node_is_cluster(r) || node_is_cluster(s))) {
-		if (may_split &&
-		    oracle(sv, r, s, node_ff_bound(h, r, s)) > sv->opt.eps)
-			return ACT_SPLIT;
-		*ff = 0;
-		*spread = 0;
-		return ACT_STORE;
-	}
-	*ff = (float)f;
-	*spread = (float)sp;
-	return f > 0 ? ACT_STORE : ACT_DROP;
-}
-
-typedef struct eval_job {
-	rad_solver *sv;
-	hr_state *st;
-} eval_job;
-
-static void eval_range(void *ud, size_t b, size_t e, int thread)
-{
-	eval_job *j = ud;
-	for (size_t i = b; i < e; i++) {
-		hr_pair p = j->st->cand.v[i];
-		hr_eval *out = &j->st->eval[i];
-		out->ff = out->spread = 0;
-		out->action = evaluate(j->sv, p.rcv, p.src, &out->ff,
-		                       &out->spread, &j->st->rays[thread]);
-	}
-}
-
-static rad_status store_link(rad_solver *sv, uint32_t r, uint32_t s, float ff,
-                             float spread)
-{
-	uint32_t id = rad_link_new(&sv->h, r, s, ff, spread);
-	if (id == RAD_NONE)
-		return RAD_ERR_NOMEM;
-	uint32_t *head = rad_node_links(&sv->h, r);
-	rad_link_at(&sv->h, id)->next = *head;
-	*head = id;
-	sv->stats.links_created++;
-	return RAD_OK;
-}
-
-/* Evaluate the current wave in parallel, then apply it in order. */
-static rad_status run_wave(rad_solver *sv, hr_state *st)
-{
-	size_t n = st->cand.n;
-	if (n > st->eval_cap) {
-		hr_eval *e = rad_mem_realloc(&sv->mem, RAD_MEM_SCRATCH,
-		                             st->eval, n * sizeof(*e));
-		if (!e)
-			return RAD_ERR_NOMEM;
-		st->eval = e;
-		st->eval_cap = n;
-	}
-	eval_job job = {sv, st};
-	rad_par_for(sv->par, n, 16, eval_range, &job);
-	for (size_t i = 0; i < n; i++) {
-		hr_pair p = st->cand.v[i];
-		rad_status rs = RAD_OK;
-		uint8_t act = st->eval[i].action;
-		if (act == ACT_STORE)
-			rs = store_link(sv, p.rcv, p.src, st->eval[i].ff,
-			                st->eval[i].spread);
-		else if (act == ACT_SPLIT || act == ACT_SPLIT_RCV)
-			rs = vec_push(sv, &st->split, p.rcv, p.src,
-			              act == ACT_SPLIT_RCV);
-		if (rs)
-			return rs;
-	}
-	st->cand.n = 0;
-	return RAD_OK;
-}
-
-/* Turn the pairs to split into the children pairs of the next wave. */
-static rad_status expand_splits(rad_solver *sv, hr_state *st)
-{
-	rad_hier *h = &sv->h;
-	for (size_t i = 0; i < st->split.n; i++) {
-		hr_pair p = st->split.v[i];
-		uint32_t kr[4] = {p.rcv}, ks[4] = {p.src};
-		int nr = 1, ns = 1;
-		int side = node_split_side(h, p.rcv, p.src, (int)p.rcv_only);
-		if (side & 1)
-			nr = node_children(h, p.rcv, kr);
-		if (side == 3) {
-			ns = nr;
-			memcpy(ks, kr, sizeof(ks));
-		} else if (side & 2) {
-			ns = node_children(h, p.src, ks);
-		}
-		if (nr == 0 || ns == 0)
-			return RAD_ERR_NOMEM;
-		for (int a = 0; a < nr; a++) {
-			for (int b = 0; b < ns; b++) {
-				if (kr[a] == ks[b] && !node_is_cluster(kr[a]))
-					continue; /* planar: F = 0 */
-				rad_status rs = vec_push(sv, &st->cand, kr[a],
-				                         ks[b], 0);
-				if (rs)
-					return rs;
-			}
-		}
-	}
-	st->split.n = 0;
-	return RAD_OK;
-}
-
-/* Run waves until nothing is left to split. */
-static rad_status refine_waves(rad_solver *sv, hr_state *st)
-{
-	while (st->cand.n > 0 || st->split.n > 0) {
-		if (st->cand.n > 0) {
-			rad_status rs = run_wave(sv, st);
-			if (rs)
-				return rs;
-		}
-		if (rad_solver_cancelled(sv))
-			st->force_store = 1; /* finish at the current level */
-		rad_status rs = expand_splits(sv, st);
-		if (rs)
-			return rs;
-	}
-	return RAD_OK;
-}
-
-static rad_status initial_links(rad_solver *sv, hr_state *st)
-{
-	const rad_scene *s = sv->scene;
-	rad_status rs = RAD_OK;
-	for (uint32_t l = 0; l < s->nlights && !rs; l++)
-		rs = vec_push(sv, &st->cand, RAD_TAG_CLUSTER, l | RAD_TAG_LIGHT,
-		              0);
-	if (rs)
-		return rs;
-	if (sv->opt.clustering) {
-		rs = vec_push(sv, &st->cand, RAD_TAG_CLUSTER, RAD_TAG_CLUSTER,
-		              0);
-		return rs ? rs : refine_waves(sv, st);
-	}
-	/* Without clusters, lights link to every polygon directly. */
-	st->cand.n = 0;
-	uint32_t n = s->npolys;
-	for (uint32_t i = 0; i < n && !rs; i++)
-		for (uint32_t l = 0; l < s->nlights && !rs; l++)
-			rs = vec_push(sv, &st->cand, i, l | RAD_TAG_LIGHT, 0);
-	if (!rs)
-		rs = refine_waves(sv, st);
-	for (uint32_t i = 0; i < n && !rs; i++) {
-		for (uint32_t j = 0; j < n && !rs; j++)
-			if (i != j)
-				rs = vec_push(sv, &st->cand, i, j, 0);
-		if (!rs && (st->cand.n >= HR_BLOCK_PAIRS || i + 1 == n)) {
-			rs = refine_waves(sv, st);
-			rad_solver_progress(sv, 0.8 * (i + 1) / n);
-		}
-	}
-	return rs;
-}
-
-/* Unlink the link *prev points to, queue its pair for splitting. */
-static rad_status requeue(rad_solver *sv, hr_state *st, uint32_t *prev,
-                          int rcv_only)
-{
-	uint32_t id = *prev;
-	rad_link *l = rad_link_at(&sv->h, id);
-	rad_status rs =
-	        vec_push(sv, &st->split, l->rcv, l->src, (uint32_t)rcv_only);
-	if (rs)
-		return rs;
-	*prev = l->next;
-	rad_pool_release(&sv->h.links, id);
-	sv->stats.links_deleted++;
-	return RAD_OK;
-}
-
-/*
- * Error bound of a link's irradiance at the worst point of its receiver
- * (lux): half its variation over the receiver.  Near corners the errors of
- * a leaf's links share a sign, so they are added, not combined in
- * quadrature (measured: quadrature let leaves in a closed box drift 20 %).
- */
-static double link_error(const rad_hier *h, const rad_link *l)
-{
-	return 0.5 * node_luma_B(h, l->src) * l->spread;
-}
-
-static int cmp_desc(const void *a, const void *b)
-{
-	double x = *(const double *)a, y = *(const double *)b;
-	return (x < y) - (x > y);
-}
-
-/*
- * Smallest variation v such that dropping every link of at least v leaves
- * at most `budget` in the list.  Uses st->vals as scratch.
- */
-static rad_status budget_cut(rad_solver *sv, hr_state *st, uint32_t head,
-                             double total, double budget, double *cut)
-{
-	const rad_hier *h = &sv->h;
-	size_t n = 0;
-	for (uint32_t id = head; id != RAD_NONE; id = rad_link_at(h, id)->next)
-		n++;
-	if (n > st->vals_cap) {
-		double *v = rad_mem_realloc(&sv->mem, RAD_MEM_SCRATCH, st->vals,
-		                            n * sizeof(*v));
-		if (!v)
-			return RAD_ERR_NOMEM;
-		st->vals = v;
-		st->vals_cap = n;
-	}
-	n = 0;
-	for (uint32_t id = head; id != RAD_NONE; id = rad_link_at(h, id)->next)
-		st->vals[n++] = link_error(h, rad_link_at(h, id));
-	qsort(st->vals, n, sizeof(double), cmp_desc);
-	*cut = 0;
-	for (size_t i = 0; i < n && total > budget; i++) {
-		total -= st->vals[i];
-		*cut = st->vals[i];
-	}
-	return RAD_OK;
-}
-
-/*
- * Re-test the links a node receives.  Energy: a link whose oracle fails is
- * split (the larger end).  Accuracy: the errors of the links on a receiver
- * and on its ancestors all reach every leaf below, so when their sum
- * exceeds the budget the ancestors left, the links with the largest
- * errors are pushed to the receiver's children.  *kept gets the error of
- * the links that stay.
- */
-static rad_status retest_list(rad_solver *sv, hr_state *st, uint32_t *head,
-                              double budget, double *kept)
-{
-	rad_hier *h = &sv->h;
-	double total = 0;
-	for (uint32_t *prev = head; *prev != RAD_NONE;) {
-		rad_link *l = rad_link_at(h, *prev);
-		/* A zero link (cluster pair whose samples saw nothing) is
-		 * judged on its bound: its sources may have lit up. */
-		double f = l->ff > 0 ? l->ff : node_ff_bound(h, l->rcv, l->src);
-		if (pair_refinable(h, l->rcv, l->src) &&
-		    oracle(sv, l->rcv, l->src, f) > sv->opt.eps) {
-			rad_status rs = requeue(sv, st, prev, 0);
-			if (rs)
-				return rs;
-			continue;
-		}
-		total += link_error(h, l);
-		prev = &l->next;
-	}
-	*kept = total;
-	if (total <= budget || *head == RAD_NONE ||
-	    !node_splittable(h, rad_link_at(h, *head)->rcv))
-		return RAD_OK;
-	double cut;
-	rad_status rs = budget_cut(sv, st, *head, total, budget, &cut);
-	for (uint32_t *prev = head; !rs && *prev != RAD_NONE;) {
-		rad_link *l = rad_link_at(h, *prev);
-		double v = link_error(h, l);
-		if (v >= cut && v > 0) {
-			total -= v;
-			rs = requeue(sv, st, prev, 1);
-		} else {
-			prev = &l->next;
-		}
-	}
-	*kept = total;
-	return rs;
-}
-
-/*
- * The variation limit at element id: spread_limit, tightened where the
- * element gathered less than the scene's mean radiosity -- to `variation`
- * times its own irradiance (last iteration's, its ancestors' links and
- * the push included), never below LOCAL_FLOOR x spread_limit, so that
- * dark corners do not refine to the bottom.  The accuracy asked of the
- * lux reported is relative, and against the scene's mean alone a dim
- * place was resolved to errors as large as its own light: the underside
- * of the Graz office's window sill gathered about 10 lx where the
- * reference gives 25, its links allowed 9.1 lx of error (0.5 x the mean
- * radiosity, 18.2, luminaires included), and a point 1 cm below it read
- * -37 % (hr, defaults).  Measured against luxrad-reference at the
- * defaults, floor 1 -> 0.5: Graz worst -37.0 -> -19.5 %, mean 4.1 ->
- * 2.9 %, 23.7 -> 20.7 s, 321 -> 253 MB; Cornell box +4.47 -> +4.78 %;
- * hospital, bright hall, boxes, room, slab room within 0.5 % or better
- * (a floor of 0.3: Graz mean 2.4 %, Cornell +6.2 %).
- */
-#define LOCAL_FLOOR 0.5
-static double local_limit(const rad_solver *sv, uint32_t id)
-{
-	double lim = spread_limit(sv);
-	double i = rad_luma(rad_elem_at(&sv->h, id)->I);
-	return fmin(lim, fmax(LOCAL_FLOOR * lim, sv->opt.variation * i));
-}
-
-static rad_status retest_elem(rad_solver *sv, hr_state *st, uint32_t id,
-                              double above)
-{
-	double kept;
-	rad_status rs = retest_list(sv, st, &rad_elem_at(&sv->h, id)->links,
-	                            local_limit(sv, id) - above, &kept);
-	uint32_t c = rad_elem_at(&sv->h, id)->child;
-	for (uint32_t k = 0; k < 4 && !rs && c != RAD_NONE; k++)
-		rs = retest_elem(sv, st, c + k, above + kept);
-	return rs;
-}
-
-/* Pre-order walks over the live nodes (see hier.h on liveness). */
-typedef rad_status (*node_fn)(rad_solver *sv, void *ud, uint32_t tagged);
-
-static rad_status walk_elem(rad_solver *sv, uint32_t id, node_fn fn, void *ud)
-{
-	rad_status rs = fn(sv, ud, id);
-	uint32_t c = rad_elem_at(&sv->h, id)->child;
-	for (uint32_t k = 0; k < 4 && !rs && c != RAD_NONE; k++)
-		rs = walk_elem(sv, c + k, fn, ud);
-	return rs;
-}
-
-static rad_status walk_cluster(rad_solver *sv, uint32_t id, node_fn fn,
-                               void *ud)
-{
-	rad_status rs = fn(sv, ud, id | RAD_TAG_CLUSTER);
-	uint32_t c = rad_cluster_at(&sv->h, id)->child;
-	for (uint32_t k = 0; k < 2 && !rs && c != RAD_NONE; k++)
-		rs = walk_cluster(sv, c + k, fn, ud);
-	return rs;
-}
-
-static rad_status walk_all(rad_solver *sv, node_fn fn, void *ud)
-{
-	rad_status rs = walk_cluster(sv, 0, fn, ud);
-	for (uint32_t i = 0; i < sv->scene->npolys && !rs; i++)
-		rs = walk_elem(sv, i, fn, ud);
-	return rs;
-}
-
-static rad_status retest_cluster(rad_solver *sv, void *ud, uint32_t t)
-{
-	double kept;
-	if (!node_is_cluster(t))
-		return RAD_OK;
-	return retest_list(sv, ud, rad_node_links(&sv->h, t), INFINITY, &kept);
-}
-
-static rad_status retest_links(rad_solver *sv, hr_state *st)
-{
-	/* Clusters receive isotropically: only the energy test applies. */
-	rad_status rs = walk_cluster(sv, 0, retest_cluster, st);
-	for (uint32_t i = 0; i < sv->scene->npolys && !rs; i++)
-		rs = retest_elem(sv, st, i, 0);
-	return rs ? rs : refine_waves(sv, st);
-}
+#include "hr.h"
 
 /*
  * Energy bound.  What the receivers gather from surfaces in one step
@@ -805,7 +297,7 @@ static void count_links(rad_solver *sv)
 	rad_stats *s = &sv->stats;
 	s->links = s->links_ss = s->links_sc = s->links_cc = 0;
 	s->links_light = 0;
-	walk_all(sv, count_node, s);
+	hr_walk_all(sv, count_node, s);
 	s->links_active = s->links;
 	s->links_passive = 0;
 }
@@ -814,11 +306,7 @@ static rad_status hr_init(rad_solver *sv, rad_error *err)
 {
 	hr_state *st =
 	        rad_mem_calloc(&sv->mem, RAD_MEM_SCRATCH, 1, sizeof(*st));
-	if (st)
-		st->rays = rad_mem_calloc(&sv->mem, RAD_MEM_SCRATCH,
-		                          (size_t)rad_par_threads(sv->par),
-		                          sizeof(uint64_t));
-	if (!st || !st->rays) {
+	if (!st || wave_init(sv, &st->wave, sizeof(hr_pair))) {
 		if (st)
 			rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, st);
 		return rad_fail(err, RAD_ERR_NOMEM, "hr: out of memory");
@@ -829,11 +317,7 @@ static rad_status hr_init(rad_solver *sv, rad_error *err)
 
 static void release_scratch(rad_solver *sv, hr_state *st)
 {
-	vec_free(sv, &st->cand);
-	vec_free(sv, &st->split);
-	rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, st->eval);
-	st->eval = NULL;
-	st->eval_cap = 0;
+	wave_release(sv, &st->wave);
 	rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, st->vals);
 	st->vals = NULL;
 	st->vals_cap = 0;
@@ -843,18 +327,16 @@ static rad_status hr_step(rad_solver *sv, rad_error *err)
 {
 	hr_state *st = sv->impl;
 	rad_hier *h = &sv->h;
-	int threads = rad_par_threads(sv->par);
-	memset(st->rays, 0, (size_t)threads * sizeof(uint64_t));
-	st->force_store = 0;
+	wave_step_begin(sv, &st->wave);
 	rad_status rs = RAD_OK;
 	if (!st->started)
-		rs = initial_links(sv, st);
+		rs = hr_initial_links(sv, st);
 	else if (!st->frozen)
-		rs = retest_links(sv, st);
+		rs = hr_retest_links(sv, st);
 	st->started = 1;
 	release_scratch(sv, st);
 	if (rs)
-		return node_refine_failed(sv, rs, err);
+		return wave_failed(sv, rs, err);
 	rad_solver_progress(sv, 0.8);
 	/* The row sums' payload only once it is needed (node_extra). */
 	gather_job g = {h, {1, 1, 1}, NULL, NULL, NULL};
@@ -872,11 +354,11 @@ static rad_status hr_step(rad_solver *sv, rad_error *err)
 	if (nomem || gather_bounded(sv, &g) < 0) {
 		rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, g.xe);
 		rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, g.xc);
-		return node_refine_failed(sv, RAD_ERR_NOMEM, err);
+		return wave_failed(sv, RAD_ERR_NOMEM, err);
 	}
 	rad_solver_progress(sv, 0.95);
 	int first = sv->stats.iteration == 0;
-	walk_all(sv, study_node, &first);
+	hr_walk_all(sv, study_node, &first);
 	memmove(st->chg[1], st->chg[0], 2 * sizeof(st->chg[0]));
 	double r = push_and_update(h, &g, &st->mean_B, st->chg[0]);
 	rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, g.xe);
@@ -910,14 +392,14 @@ static rad_status hr_step(rad_solver *sv, rad_error *err)
 	}
 	st->last_r = r;
 	count_links(sv);
-	return node_step_end(sv, st->rays, st->force_store, err);
+	return wave_step_end(sv, &st->wave, err);
 }
 
 static void hr_destroy(rad_solver *sv)
 {
 	hr_state *st = sv->impl;
 	release_scratch(sv, st);
-	rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, st->rays);
+	wave_destroy(sv, &st->wave);
 	rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, st);
 	sv->impl = NULL;
 }

@@ -769,18 +769,6 @@ void node_stat_exchange(rad_solver *sv, uint32_t r, uint32_t s, double ff,
 	S->energy_hist[bin]++;
 }
 
-int node_split_side(const rad_hier *h, uint32_t r, uint32_t s, int rcv_only)
-{
-	if (r == s)
-		return 3;
-	int rs = node_splittable(h, r), ss = node_splittable(h, s);
-	if (rcv_only && rs)
-		return 1;
-	if (rs && ss)
-		return node_size(h, r) >= node_size(h, s) ? 1 : 2;
-	return rs ? 1 : 2;
-}
-
 void node_count_link(rad_stats *s, const rad_link *l)
 {
 	int rc = node_is_cluster(l->rcv);
@@ -793,28 +781,4 @@ void node_count_link(rad_stats *s, const rad_link *l)
 		s->links_sc++;
 	else
 		s->links_ss++;
-}
-
-rad_status node_refine_failed(const rad_solver *sv, rad_status rs,
-                              rad_error *err)
-{
-	return rad_fail(err, rs,
-	                "%s: refinement ran out of memory (%u elements, %u "
-	                "links)",
-	                sv->ops->name, rad_pool_live(&sv->h.elems),
-	                rad_pool_live(&sv->h.links));
-}
-
-rad_status node_step_end(rad_solver *sv, const uint64_t *rays, int cancelled,
-                         rad_error *err)
-{
-	int threads = rad_par_threads(sv->par);
-	for (int t = 0; t < threads; t++)
-		sv->stats.rays += rays[t];
-	rad_solver_progress(sv, 1.0);
-	if (cancelled)
-		return rad_fail(err, RAD_ERR_CANCELLED,
-		                "cancelled during refinement; the solution "
-		                "is consistent at the level reached");
-	return RAD_OK;
 }

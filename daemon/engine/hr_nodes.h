@@ -85,24 +85,8 @@ double node_oracle(const rad_solver *sv, uint32_t rcv, uint32_t src, double b,
  */
 void node_stat_exchange(rad_solver *sv, uint32_t r, uint32_t s, double ff,
                         double b, double inc);
-/*
- * Which end of a pair to refine: 1 the receiver, 2 the source, 3 both (a
- * cluster's self-link).  The larger splittable end, or the receiver when
- * rcv_only and it can split.
- */
-int node_split_side(const rad_hier *h, uint32_t r, uint32_t s, int rcv_only);
 /* Count a stored link in s->links and its kind (links_ss ... light). */
 void node_count_link(rad_stats *s, const rad_link *l);
-/* A refinement's failure (out of memory), reported with the pool sizes. */
-rad_status node_refine_failed(const rad_solver *sv, rad_status rs,
-                              rad_error *err);
-/*
- * End of a hierarchical step: add the threads' ray counts to the stats,
- * report full progress, and RAD_ERR_CANCELLED when refinement was cut
- * short by the cancel flag.
- */
-rad_status node_step_end(rad_solver *sv, const uint64_t *rays, int cancelled,
-                         rad_error *err);
 /*
  * The factor a link's form factor is used with when src is a cluster: what
  * it sends towards rcv against its mean radiosity (delta: dB) times its

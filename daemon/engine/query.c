@@ -28,25 +28,8 @@
  *     children's radiosity weighted by their own kernels (no extra rays)
  *     times its visible fraction; leaf: B times its visible kernel.
  *   visibility of a piece of source (a leaf, an element taken whole, an
- *     emitter): rays to its corners and centroid (trace_piece).  Corners,
- *     because a straight shadow edge crossing a convex piece always
- *     leaves corners on both sides: no such edge passes unseen, and a
- *     fixed ray count settles nothing.  A piece whose rays disagree, or a
- *     large one whose rays agree, is unsure: it goes to a per-point heap
- *     ordered by its error.  Once the walk is done and the point's total
- *     is known (refine), every agreeing piece larger than BIG_SHARE x
- *     tau x total is split once (its quarters checked with their own
- *     rays; as large as tau x total, a piece wholly wrong would be the
- *     tolerance itself), and then the pieces whose rays disagree, largest
- *     errors first, are split into quarters,
- *     each with its own exact kernel and rays, until the errors left add
- *     up to less than tau / 2 of the total (or VIS_SPLITS splits, or
- *     VIS_DEPTH levels).  Quarters take the answers of rays already
- *     traced to their shared corners (their parent's corners, centroid
- *     and edge midpoints: ray_memo), so a split traces 8 rays, not 20.
- *     Judging against the final total, not a running one, is what lets
- *     the first large source a point meets be resolved neither too
- *     coarsely nor to the bottom.
+ *     emitter): rays to its corners and centroid, and the pieces those
+ *     leave unsure refined once the point's total is known (query_vis.c).
  * Emitters come out exact: when the walk reaches the root element of a
  * polygon whose material emits, the uniform part E is evaluated on the
  * whole polygon, and only the reflected part B - E goes down its quadtree.
@@ -80,71 +63,12 @@
 #include <math.h>
 #include <string.h>
 
-#include "ff.h"
-#include "solver.h"
-#include "vis.h"
+#include "query.h"
 
 #define THETA 0.5      /* far enough: size < THETA x distance */
 #define FLOOR_REL 1e-3 /* running total floor, x scene mean exitance */
-#define VIS_DEPTH 10   /* splits of one piece, at most */
-#define VIS_HEAP 256   /* unsure pieces held per point */
-#define VIS_SPLITS 384 /* splits per point, at most */
-#define BIG_SHARE 1.0  /* agreeing pieces above this x tau x total: split */
 #define POINT_GRAIN 4  /* points per parallel chunk */
 #define NOISE_REL 1e-6 /* B - E below this share of E is float noise */
-#define NEAR_MAX 8     /* near leaves read finer per point, at most */
-
-/*
- * A piece of source whose visible fraction is not settled: w its
- * radiosity weight (the lux it gives per unit of kernel), F its exact
- * kernel, est = w F p what it added to the total, e its error estimate.
- */
-typedef struct piece {
-	rad_patch s;
-	double w, F, est, e;
-	uint8_t depth;
-	uint8_t kind;   /* PIECE_* */
-	int8_t open[5]; /* its rays (trace_piece): corners, centroid; -1 none */
-} piece;
-
-/* Rays already traced to the corners of neighbouring pieces -- a split
- * piece and its quarters, four sibling elements, an emitter and its root
- * element -- that trace_piece reuses: a piece's 5 and four more pieces'. */
-#define MEMO_RAYS (5 + 4 * 5)
-typedef struct ray_memo {
-	v3 at[MEMO_RAYS];
-	int8_t open[MEMO_RAYS];
-	int n;
-} ray_memo;
-
-enum {
-	PIECE_PARTIAL, /* its rays disagree: a shadow edge crosses it */
-	PIECE_WHOLE,   /* rays agree: only a large top piece is checked */
-};
-
-/* A leaf near the point whose radiosity may vary across what x sees. */
-typedef struct near {
-	rad_patch s;
-	double irr;  /* its mean irradiance */
-	double c, e; /* what it added (r x visible kernel), its error */
-} near;
-
-typedef struct gather {
-	const rad_hier *h;
-	const rad_vis *vis;
-	v3 x, n;       /* the point and its unit normal */
-	double tau;    /* relative tolerance */
-	double total;  /* photopic lux gathered so far */
-	double floor;  /* smallest running total used by the tests */
-	double err2;   /* sum of squared independent error estimates */
-	double errvis; /* visibility error given up on (heap full, depth) */
-	double direct; /* of total: lights and emission (not reflected) */
-	int nested;    /* 1 inside a near leaf's own gather (no deeper) */
-	piece heap[VIS_HEAP]; /* max-heap on e */
-	int nheap;
-	near near[NEAR_MAX]; /* near leaves to read finer (near_leaves) */
-	int nnear;
-} gather;
 
 static double gather_point(gather *g, const rad_hier *h, const rad_vis *vis,
                            v3 x, v3 n, double tau, double floor, int nested);
@@ -154,317 +78,14 @@ static double luma_d(const double c[3])
 	return RAD_LUMA_R * c[0] + RAD_LUMA_G * c[1] + RAD_LUMA_B * c[2];
 }
 
-static double running(const gather *g)
-{
-	return fmax(g->total, g->floor);
-}
-
 static void add_error(gather *g, double e)
 {
 	g->err2 += e * e;
 }
 
-/* Quarter a patch the way the quadtree does (the middle triangle of a
- * triangle points the other way but keeps the normal). */
-static void patch_quarters(const rad_patch *p, rad_patch q[4])
-{
-	v3 a = v3_scale(p->e1, 0.5), b = v3_scale(p->e2, 0.5);
-	v3 org[4] = {p->p0, v3_add(p->p0, a), v3_add(p->p0, b),
-	             v3_add(v3_add(p->p0, a), b)};
-	for (int k = 0; k < 4; k++) {
-		q[k] = *p;
-		q[k].p0 = org[k];
-		q[k].e1 = a;
-		q[k].e2 = b;
-		q[k].area = p->area / 4;
-	}
-	if (!p->quad) {
-		q[3].e1 = v3_scale(a, -1);
-		q[3].e2 = v3_scale(b, -1);
-	}
-}
-
-/* Longest extent of a patch (its longest edge or diagonal). */
-static double patch_size(const rad_patch *p)
-{
-	v3 d = p->quad ? v3_add(p->e1, p->e2) : v3_sub(p->e2, p->e1);
-	return fmax(fmax(v3_len(p->e1), v3_len(p->e2)), v3_len(d));
-}
-
-/* ------------------------------------------------- visibility of pieces */
-
-static void heap_swap(piece *a, piece *b)
-{
-	piece t = *a;
-	*a = *b;
-	*b = t;
-}
-
-/* Settle a piece as it is: its error is kept in the estimate. */
-static void settle(gather *g, const piece *pc)
-{
-	if (pc->kind != PIECE_WHOLE)
-		g->errvis += pc->e;
-}
-
-static void sift_up(gather *g, int i)
-{
-	while (i > 0 && g->heap[(i - 1) / 2].e < g->heap[i].e) {
-		heap_swap(&g->heap[(i - 1) / 2], &g->heap[i]);
-		i = (i - 1) / 2;
-	}
-}
-
-/*
- * Full, the heap keeps the larger errors: the smallest held (a leaf of
- * the heap, the second half of the array) or the newcomer is settled.
- */
-static void heap_push(gather *g, const piece *pc)
-{
-	if (g->nheap < VIS_HEAP) {
-		g->heap[g->nheap] = *pc;
-		sift_up(g, g->nheap++);
-		return;
-	}
-	int m = VIS_HEAP / 2;
-	for (int i = m + 1; i < VIS_HEAP; i++)
-		if (g->heap[i].e < g->heap[m].e)
-			m = i;
-	if (g->heap[m].e >= pc->e) {
-		settle(g, pc);
-		return;
-	}
-	settle(g, &g->heap[m]);
-	g->heap[m] = *pc;
-	sift_up(g, m);
-}
-
-static piece heap_pop(gather *g)
-{
-	piece top = g->heap[0];
-	g->heap[0] = g->heap[--g->nheap];
-	for (int i = 0;;) {
-		int l = 2 * i + 1, r = l + 1, m = i;
-		if (l < g->nheap && g->heap[l].e > g->heap[m].e)
-			m = l;
-		if (r < g->nheap && g->heap[r].e > g->heap[m].e)
-			m = r;
-		if (m == i)
-			break;
-		heap_swap(&g->heap[m], &g->heap[i]);
-		i = m;
-	}
-	return top;
-}
-
-/*
- * The points a piece's rays go to: its corners pulled 1 % towards its
- * centroid (off the edges it shares), then the centroid.  Returns the
- * count (4 or 5).
- */
-static int piece_targets(const rad_patch *s, v3 v[5])
-{
-	int nv = rad_patch_vertices(s, v);
-	v3 c = rad_patch_centroid(s);
-	for (int k = 0; k < nv; k++)
-		v[k] = v3_add(c, v3_scale(v3_sub(v[k], c), 0.99));
-	v[nv] = c;
-	return nv + 1;
-}
-
-/*
- * Trace the rays of a piece to its corners and its centroid
- * (piece_targets): fills p (the visible fraction, half from the centroid,
- * half from the corners) and open[] (each ray's answer, -1 where none was
- * tried), and returns the number of rays counted.  Corners, because a
- * straight shadow edge that crosses a convex piece always leaves corners
- * on both sides: no such edge can pass between the rays unseen.  Rays go
- * only to points in front of the point's tangent plane (the rest of the
- * piece does not contribute, and a ray there would run under the
- * surface); 0 rays: the piece straddles the plane with no point in front,
- * counted visible.  With a memo (the quarters of a split piece), a target
- * within 3 % of the piece's size of a point already traced takes that
- * answer instead of a ray: the quarters' corners are their parent's
- * corners, centroid and edge midpoints, shared among them, so a split
- * costs 8 new rays of a parallelogram's 20 (7 of a triangle's 16).
- */
-static int trace_piece(const gather *g, const rad_patch *s, double *p,
-                       int8_t open[5], ray_memo *memo)
-{
-	v3 v[5];
-	int nt = piece_targets(s, v), tried = 0;
-	double open_v = 0, open_c = 0, nvt = 0, wc = 0;
-	double tol = 0.03 * patch_size(s), tol2 = tol * tol;
-	for (int k = 0; k < nt; k++) {
-		open[k] = -1;
-		if (!(v3_dot(v3_sub(v[k], g->x), g->n) > 0))
-			continue;
-		tried++;
-		int o = -1;
-		for (int i = 0; memo && i < memo->n && o < 0; i++) {
-			v3 d = v3_sub(memo->at[i], v[k]);
-			if (v3_dot(d, d) <= tol2)
-				o = memo->open[i];
-		}
-		if (o < 0) {
-			o = rad_vis_segment(g->vis, g->x, &g->n, v[k], &s->n);
-			if (memo && memo->n < MEMO_RAYS) {
-				memo->at[memo->n] = v[k];
-				memo->open[memo->n++] = (int8_t)o;
-			}
-		}
-		open[k] = (int8_t)o;
-		if (k < nt - 1) {
-			nvt++;
-			open_v += o;
-		} else {
-			wc = 1;
-			open_c = o;
-		}
-	}
-	if (tried == 0)
-		*p = 1;
-	else if (nvt == 0)
-		*p = open_c;
-	else if (!wc)
-		*p = open_v / nvt;
-	else
-		*p = 0.5 * open_c + 0.5 * open_v / nvt;
-	return tried;
-}
-
-/*
- * The error of a traced piece of share c = w F whose rays disagree: the
- * binomial error of the fraction, c sqrt(p (1 - p) / k); c / 2 when no
- * ray could be tried.  Agreeing rays leave no error (no straight edge
- * passes between corners unseen); a large piece is checked once more all
- * the same (refine).
- */
-static double piece_error(double c, double p, int tried)
-{
-	if (tried == 0)
-		return c / 2;
-	return c * sqrt(p * (1 - p) / tried);
-}
-
-/*
- * Visible kernel of a piece of source of radiosity weight w (the top of a
- * source: a leaf, an element taken whole, an emitter).  Five rays now,
- * fewer where memo (siblings in one quadtree, an emitter and its root
- * element) already has its corners; a piece they leave unsure waits in
- * the point's heap until the total is known (refine).
- */
-static double visible_ff(gather *g, const rad_patch *s, double F, double w,
-                         ray_memo *memo)
-{
-	double p;
-	int8_t open[5];
-	int tried = trace_piece(g, s, &p, open, memo);
-	piece pc = {*s, w, F, w * F * p, 0, 0, PIECE_WHOLE, {0}};
-	memcpy(pc.open, open, sizeof(open));
-	if (tried == 0 || (p > 0 && p < 1)) {
-		pc.kind = PIECE_PARTIAL;
-		pc.e = piece_error(w * F, p, tried);
-	} else if (w * F > BIG_SHARE * g->tau * running(g)) {
-		/* Large so far (the total only grows): checked in refine. */
-		pc.e = w * F / (tried + 2);
-	}
-	if (pc.e > 0)
-		heap_push(g, &pc);
-	return F * p;
-}
-
-/* Split one unsure piece into quarters, each with its own exact kernel
- * and rays; the total is corrected by the difference.  Returns the sum of
- * the errors of the quarters put back in the heap. */
-static double split_piece(gather *g, const piece *pc)
-{
-	rad_patch q[4];
-	double pushed = 0;
-	ray_memo memo;
-	memo.n = 0;
-	int nt = piece_targets(&pc->s, memo.at);
-	for (int k = 0; k < nt; k++)
-		if (pc->open[k] >= 0) {
-			memo.at[memo.n] = memo.at[k];
-			memo.open[memo.n++] = pc->open[k];
-		}
-	patch_quarters(&pc->s, q);
-	g->total -= pc->est;
-	for (int k = 0; k < 4; k++) {
-		double f = rad_ff_point_patch(g->x, g->n, &q[k]), p;
-		if (!(f > 0))
-			continue;
-		int8_t open[5];
-		int tried = trace_piece(g, &q[k], &p, open, &memo);
-		int kind = tried == 0 || (p > 0 && p < 1) ? PIECE_PARTIAL
-		                                          : PIECE_WHOLE;
-		piece c = {q[k],          pc->w, f,
-		           pc->w * f * p, 0,     (uint8_t)(pc->depth + 1),
-		           (uint8_t)kind, {0}};
-		memcpy(c.open, open, sizeof(open));
-		g->total += c.est;
-		/* Quarters whose rays agree are settled. */
-		if (kind == PIECE_PARTIAL)
-			c.e = piece_error(pc->w * f, p, tried);
-		if (c.e <= 0)
-			continue;
-		if (c.depth >= VIS_DEPTH || g->nheap == VIS_HEAP) {
-			g->errvis += c.e;
-			continue;
-		}
-		heap_push(g, &c);
-		pushed += c.e;
-	}
-	return pushed;
-}
-
-/*
- * Once the point's total is known: a whole piece whose rays agreed is
- * unsure only if it is large (over BIG_SHARE x tau x total: its quarters
- * get rays of their own); then the pieces with the largest errors are
- * split until their errors add up to less than half the tolerance, or the
- * split budget is spent.  Errors are added linearly: along one shadow
- * edge they have the same sign.
- */
-static void refine(gather *g)
-{
-	double big = BIG_SHARE * g->tau * running(g), sum = 0;
-	piece whole[VIS_HEAP];
-	int n = g->nheap, nw = 0;
-	g->nheap = 0;
-	for (int i = 0; i < n; i++) {
-		piece pc = g->heap[i];
-		if (pc.kind == PIECE_WHOLE) {
-			if (pc.w * pc.F > big)
-				whole[nw++] = pc;
-			continue;
-		}
-		heap_push(g, &pc);
-		sum += pc.e;
-	}
-	/* Each large agreeing piece is checked once, its quarters with rays
-	 * of their own, before the shadow edges: mixed in one heap, at a
-	 * tight tolerance these checks filled it and spent the budget, and a
-	 * partly hidden source kept its first rays (measured: --accuracy
-	 * 0.005 read +11 % / -13 % beside a plate's shadow). */
-	for (int i = 0; i < nw; i++)
-		sum += split_piece(g, &whole[i]);
-	for (int splits = 0; g->nheap > 0 && splits < VIS_SPLITS; splits++) {
-		if (sum <= 0.5 * g->tau * running(g))
-			break;
-		piece pc = heap_pop(g);
-		sum -= pc.e;
-		sum += split_piece(g, &pc);
-	}
-	for (int i = 0; i < g->nheap; i++)
-		g->errvis += g->heap[i].e;
-	g->nheap = 0;
-}
-
 static int far_enough(const gather *g, double size, double dist, double bound)
 {
-	return size < THETA * dist && bound <= g->tau * running(g);
+	return size < THETA * dist && bound <= g->tau * query_running(g);
 }
 
 /*
@@ -536,7 +157,7 @@ static void near_leaves(gather *g)
 		if (n->c <= g->tau * g->total)
 			continue;
 		rad_patch q[4];
-		patch_quarters(&n->s, q);
+		query_patch_quarters(&n->s, q);
 		/* An error in a quarter's irradiance weighs c / total in x's.
 		 */
 		double tau = fmin(0.25, 0.5 * g->tau * g->total / n->c);
@@ -589,7 +210,7 @@ static void gather_elem(gather *g, uint32_t id, const float E[3], double rp,
 	if (F <= 0)
 		return;
 	if (e->child == RAD_NONE) {
-		double fv = visible_ff(g, &p, F, r, memo);
+		double fv = query_visible_ff(g, &p, F, r, memo);
 		g->total += r * fv;
 		if (rp < 0)
 			return;
@@ -597,12 +218,12 @@ static void gather_elem(gather *g, uint32_t id, const float E[3], double rp,
 		add_error(g, el);
 		if (!g->nested && el > 0 && irr > 0 &&
 		    v3_len(v3_sub(rad_patch_centroid(&p), g->x)) <
-		            patch_size(&p))
+		            query_patch_size(&p))
 			near_add(g, &p, irr, r * fv, el);
 		return;
 	}
 	double d = v3_len(v3_sub(rad_patch_centroid(&p), g->x));
-	if (!far_enough(g, patch_size(&p), d, r * F)) {
+	if (!far_enough(g, query_patch_size(&p), d, r * F)) {
 		ray_memo kids;
 		kids.n = 0;
 		for (uint32_t k = 0; k < 4; k++)
@@ -613,7 +234,7 @@ static void gather_elem(gather *g, uint32_t id, const float E[3], double rp,
 	double rf = children_rf(g, e, E);
 	if (!(rf > 0))
 		return;
-	double v = visible_ff(g, &p, F, rf / F, memo) / F;
+	double v = query_visible_ff(g, &p, F, rf / F, memo) / F;
 	g->total += rf * v;
 	add_error(g, fabs(rf - r * F) * v);
 }
@@ -635,7 +256,7 @@ static void gather_poly(gather *g, uint32_t pid)
 	ray_memo memo;
 	memo.n = 0;
 	if (F > 0) {
-		double c = e * visible_ff(g, &p, F, e, &memo);
+		double c = e * query_visible_ff(g, &p, F, e, &memo);
 		g->total += c;
 		g->direct += c;
 	}
@@ -755,7 +376,7 @@ static double gather_point(gather *g, const rad_hier *h, const rad_vis *vis,
 	g->direct = g->total;
 	if (s->npolys > 0)
 		gather_cluster(g, 0 | RAD_TAG_CLUSTER);
-	refine(g);
+	query_refine_pieces(g);
 	near_leaves(g);
 	return g->total;
 }

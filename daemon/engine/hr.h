@@ -1,0 +1,41 @@
+/*
+ * hr.h -- what the classic hierarchical radiosity solver's two files
+ * share: hr.c runs the iterations (gather, push, update, pull), and
+ * hr_refine.c makes and re-tests the links they gather over.
+ */
+#ifndef LUXRAD_HR_H
+#define LUXRAD_HR_H
+
+#include "wave.h"
+
+typedef struct hr_pair {
+	uint32_t rcv, src;
+	uint32_t rcv_only; /* split the receiver, not the larger end */
+} hr_pair;
+
+typedef struct hr_state {
+	rad_wave wave;    /* items: hr_pair */
+	int started;      /* initial links made */
+	double mean_B;    /* area-mean photopic radiosity of the last step */
+	double last_r;    /* residual of the last step */
+	int frozen;       /* refinement stopped (hr_step) */
+	int clip;         /* leaves' gain held below 1 (node_extra) */
+	double chg[3][3]; /* sum A |dB| per channel, last three steps */
+	double q_jump;    /* rate of the last extrapolation (tail) */
+	int since;        /* steps since it (or since the start) */
+	double *vals;     /* scratch for budget_cut */
+	size_t vals_cap;
+} hr_state;
+
+/* The first step's links (hr_refine.c): the root cluster's self-link and
+ * the lights', refined; without clustering, every pair of polygons. */
+rad_status hr_initial_links(rad_solver *sv, hr_state *st);
+/* Later steps: re-test every stored link, refine those that fail. */
+rad_status hr_retest_links(rad_solver *sv, hr_state *st);
+
+/* Pre-order walk over the live nodes (see hier.h on liveness): clusters,
+ * then every polygon's quadtree; stops at the first failure. */
+typedef rad_status (*hr_node_fn)(rad_solver *sv, void *ud, uint32_t tagged);
+rad_status hr_walk_all(rad_solver *sv, hr_node_fn fn, void *ud);
+
+#endif

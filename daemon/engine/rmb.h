@@ -1,0 +1,76 @@
+/*
+ * rmb.h -- what the reduced-memory solver's two files share: rmb.c runs
+ * the iterations (radiosity to transmit, push, update, pull), and
+ * rmb_refine.c walks the link hierarchy (RefineAndGather).
+ */
+#ifndef LUXRAD_RMB_H
+#define LUXRAD_RMB_H
+
+#include "wave.h"
+
+/* rmb's own link flags, beside RAD_LINK_PASSIVE and RAD_LINK_SPLIT_SRC. */
+enum {
+	L_NEW = 1u << 4,   /* made this iteration: no form factor yet */
+	L_DEAD = 1u << 5,  /* carries nothing: remove */
+	L_PRUNE = 1u << 6, /* passive link used at its level: drop subtree */
+};
+
+typedef struct rmb_item {
+	uint32_t rcv, src;
+	uint32_t link; /* its record, or RAD_NONE for a transient pair */
+	uint32_t anc;  /* transient: the record whose form factor it adds to */
+	float w;       /* transient: its weight in anc's form factor */
+} rmb_item;
+
+/* Open-addressing set of 64-bit pair keys (study statistics, STUDY). */
+typedef struct rmb_set {
+	uint64_t *keys; /* 0 = empty slot; keys are stored + 1 */
+	size_t n, cap;
+} rmb_set;
+
+typedef struct rmb_state {
+	rad_wave wave; /* items: rmb_item; its todo is the work list */
+	uint32_t *roots;
+	size_t nroots, cap_roots; /* stored root links, LINKS */
+	uint8_t *black;           /* per cluster id: contents all rho = 0 */
+	float *arefl;             /* per cluster id: area that reflects */
+	float *rhomax;            /* per cluster id: largest reflectance */
+	uint32_t ncl;
+	uint32_t iter;    /* iterations done */
+	double mean_dB;   /* area-mean photopic dB after the last update */
+	double mean_B;    /* ... and B */
+	double chg[3][3]; /* sum A |dB| per channel, last three steps */
+	double q[3];      /* the tail jump's rates (tail_jump) */
+	double qmax;      /* ... the largest */
+	int jumped;       /* tail_jump done */
+	rmb_set deleted;  /* study: pairs deleted so far */
+	/* Receiver accuracy (rcv_too_coarse, rmb_refine.c), by element id:
+	 * cut   links at least this error (a fraction of the limit) go to
+	 *       the receiver's children; 0 = none.  Sticky, ELEM_SURFACE.
+	 * err   sum of the errors of the links gathered this iteration,
+	 * emax  the largest of them; SCRATCH, for one step. */
+	float *cut, *err, *emax;
+	size_t cap_cut, cap_err, cap_emax;
+} rmb_state;
+
+/*
+ * RefineAndGather (rmb_refine.c): walk the link trees -- the first step's
+ * new roots, then the stored ones -- gathering every transfer at its
+ * level into I, and settle them; then mark where receivers were too
+ * coarse.
+ */
+rad_status rmb_refine_gather(rad_solver *sv, rmb_state *st);
+
+/* 1 if no polygon of the node reflects (a pure source, or black). */
+int rmb_node_black(const rad_solver *sv, uint32_t t);
+/* Area of the node's polygons that reflect (rho > 0). */
+double rmb_node_arefl(const rad_solver *sv, uint32_t t);
+/* Largest reflectance inside a node (over channels), for anticipation. */
+double rmb_node_rho_max(const rad_solver *sv, uint32_t t);
+/* The receiver-accuracy budget of the iteration (lux). */
+double rmb_spread_limit(const rad_solver *sv);
+/* A link the walk deletes: counted unless it was made this iteration, and
+ * its pair kept for the study statistics (*rs: out of memory). */
+void rmb_count_deleted(rad_solver *sv, const rad_link *l, rad_status *rs);
+
+#endif

@@ -1,0 +1,240 @@
+/*
+ * wave.c -- the refinement waves of the hierarchical solvers (wave.h),
+ * shared by hr (hr.c) and rmb (rmb.c).
+ *
+ * A wave is a list of items -- pairs (receiver, source), with whatever a
+ * solver keeps beside them -- that the refinement judges at once.
+ * Judging is the costly part: the oracle on an estimated or stored form
+ * factor and, for a pair at its level, the accurate form factor with its
+ * shadow rays.  It only reads the hierarchy and writes the item's own
+ * verdict slot, so the worker threads share the wave out in chunks, in
+ * whatever order they claim them (par.c).  Applying the verdicts is
+ * cheap and changes the hierarchy -- links stored or transfers gathered,
+ * elements split on demand (rad_elem_split is not thread-safe), children
+ * pairs listed for a later wave -- so the calling thread does it alone,
+ * in list order.
+ *
+ * Why the result does not depend on the threads: a verdict is a function
+ * of its item and of the hierarchy as the wave found it, never of which
+ * thread computed it or of what else that thread ran; and everything
+ * that depends on order -- element and link ids taken from the pools, the
+ * order of each receiver's links, every floating-point sum -- happens
+ * while applying, in the one order of the list.  So for a given thread
+ * count every run gives the same result, and the thread count itself only
+ * changes who judges what: one thread or many, the result is the same bit
+ * for bit.  Rays are counted per thread (no shared counter) and summed at
+ * the end of the step.
+ *
+ * hr runs its waves breadth first: the children of the pairs a wave
+ * refused make the next wave.  rmb walks its link trees depth first: its
+ * work list is a stack, and a wave is the top chunk of it.  Once the
+ * caller cancels, later waves keep every pair at the level reached, so
+ * that the links left still make a consistent solution.
+ */
+#include "wave.h"
+
+#include <string.h>
+
+#include "err.h"
+
+/* Items judged per chunk of a worker: few, since an item may trace rays
+ * and the cost of items varies a lot. */
+#define WAVE_GRAIN 16
+
+rad_status wave_init(rad_solver *sv, rad_wave *w, size_t item_size)
+{
+	memset(w, 0, sizeof(*w));
+	w->item_size = (uint32_t)item_size;
+	w->rays = rad_mem_calloc(&sv->mem, RAD_MEM_SCRATCH,
+	                         (size_t)rad_par_threads(sv->par),
+	                         sizeof(uint64_t));
+	return w->rays ? RAD_OK : RAD_ERR_NOMEM;
+}
+
+void wave_destroy(rad_solver *sv, rad_wave *w)
+{
+	wave_release(sv, w);
+	rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, w->rays);
+	w->rays = NULL;
+}
+
+void wave_step_begin(rad_solver *sv, rad_wave *w)
+{
+	int threads = rad_par_threads(sv->par);
+	memset(w->rays, 0, (size_t)threads * sizeof(uint64_t));
+	w->force_store = 0;
+}
+
+static void list_free(rad_solver *sv, wave_list *l)
+{
+	rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, l->v);
+	memset(l, 0, sizeof(*l));
+}
+
+void wave_release(rad_solver *sv, rad_wave *w)
+{
+	list_free(sv, &w->todo);
+	list_free(sv, &w->held);
+	rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, w->verdict);
+	w->verdict = NULL;
+	w->verdict_cap = 0;
+}
+
+rad_status wave_push(rad_solver *sv, const rad_wave *w, wave_list *l,
+                     const void *item)
+{
+	unsigned char *p = rad_mem_grow(&sv->mem, RAD_MEM_SCRATCH, l->v,
+	                                &l->cap, l->n + 1, w->item_size, 1024);
+	if (!p)
+		return RAD_ERR_NOMEM;
+	l->v = p;
+	memcpy(p + l->n * w->item_size, item, w->item_size);
+	l->n++;
+	return RAD_OK;
+}
+
+rad_status wave_take_top(rad_solver *sv, rad_wave *w, size_t n)
+{
+	unsigned char *p = rad_mem_grow(&sv->mem, RAD_MEM_SCRATCH, w->held.v,
+	                                &w->held.cap, n, w->item_size, 1024);
+	if (!p)
+		return RAD_ERR_NOMEM;
+	w->todo.n -= n;
+	memcpy(p, (unsigned char *)w->todo.v + w->todo.n * w->item_size,
+	       n * w->item_size);
+	w->held.v = p;
+	w->held.n = n;
+	return RAD_OK;
+}
+
+typedef struct judge_job {
+	rad_solver *sv;
+	rad_wave *w;
+	const unsigned char *items;
+	wave_judge_fn judge;
+} judge_job;
+
+static void judge_range(void *ud, size_t b, size_t e, int thread)
+{
+	const judge_job *j = ud;
+	rad_wave *w = j->w;
+	int may_split = !w->force_store;
+	for (size_t i = b; i < e; i++) {
+		wave_verdict *v = &w->verdict[i];
+		v->ff = v->spread = 0;
+		v->action = j->judge(j->sv, j->items + i * w->item_size,
+		                     may_split, v, &w->rays[thread]);
+	}
+}
+
+rad_status wave_run(rad_solver *sv, rad_wave *w, const void *items, size_t n,
+                    wave_judge_fn judge, wave_apply_fn apply)
+{
+	if (n > w->verdict_cap) {
+		wave_verdict *v = rad_mem_realloc(&sv->mem, RAD_MEM_SCRATCH,
+		                                  w->verdict, n * sizeof(*v));
+		if (!v)
+			return RAD_ERR_NOMEM;
+		w->verdict = v;
+		w->verdict_cap = n;
+	}
+	judge_job job = {sv, w, items, judge};
+	rad_par_for(sv->par, n, WAVE_GRAIN, judge_range, &job);
+	for (size_t i = 0; i < n; i++) {
+		rad_status rs =
+		        apply(sv, job.items + i * w->item_size, &w->verdict[i]);
+		if (rs)
+			return rs;
+	}
+	if (rad_solver_cancelled(sv))
+		w->force_store = 1; /* finish at the current level */
+	return RAD_OK;
+}
+
+/*
+ * A cluster's few sample points seeing nothing of the other end prove
+ * nothing about its contents.  While the pair could carry little even at
+ * its bound (box gap), it stays as a zero link that later iterations
+ * re-test on that bound; else it is looked at closer now.  Between
+ * surfaces the samples cover both ends, and an all-blocked answer has
+ * already been re-checked with other points (rad_ff_patch_spread): zero
+ * means zero.
+ */
+uint8_t wave_at_level(const rad_solver *sv, uint32_t r, uint32_t s, double b,
+                      double f, double sp, int may_split, wave_verdict *out)
+{
+	if (!(f > 0) && (node_is_cluster(r) || node_is_cluster(s))) {
+		if (may_split &&
+		    node_oracle(sv, r, s, b, node_ff_bound(&sv->h, r, s)) >
+		            sv->opt.eps)
+			return WAVE_SPLIT;
+		return WAVE_LEVEL;
+	}
+	out->ff = (float)f;
+	out->spread = (float)sp;
+	return f > 0 ? WAVE_LEVEL : WAVE_DROP;
+}
+
+/* Which end of a pair to refine: 1 the receiver, 2 the source, 3 both
+ * (a cluster's self-link). */
+static int split_side(const rad_hier *h, uint32_t r, uint32_t s, int rcv_only)
+{
+	if (r == s)
+		return 3;
+	int rs = node_splittable(h, r), ss = node_splittable(h, s);
+	if (rcv_only && rs)
+		return 1;
+	if (rs && ss)
+		return node_size(h, r) >= node_size(h, s) ? 1 : 2;
+	return rs ? 1 : 2;
+}
+
+int wave_children(rad_hier *h, uint32_t r, uint32_t s, int rcv_only,
+                  uint32_t kr[WAVE_KIDS], uint32_t ks[WAVE_KIDS], int *side)
+{
+	uint32_t cr[RAD_CLUSTER_LEAF_MAX] = {r}, cs[RAD_CLUSTER_LEAF_MAX] = {s};
+	int nr = 1, ns = 1, n = 0;
+	*side = split_side(h, r, s, rcv_only);
+	if (*side & 1)
+		nr = node_children(h, r, cr);
+	if (*side == 3) {
+		ns = nr;
+		memcpy(cs, cr, sizeof(cs));
+	} else if (*side & 2) {
+		ns = node_children(h, s, cs);
+	}
+	if (nr == 0 || ns == 0)
+		return -1;
+	for (int a = 0; a < nr; a++) {
+		for (int b = 0; b < ns; b++) {
+			if (cr[a] == cs[b] && !node_is_cluster(cr[a]))
+				continue; /* planar: F = 0 */
+			kr[n] = cr[a];
+			ks[n] = cs[b];
+			n++;
+		}
+	}
+	return n;
+}
+
+rad_status wave_failed(const rad_solver *sv, rad_status rs, rad_error *err)
+{
+	return rad_fail(err, rs,
+	                "%s: refinement ran out of memory (%u elements, %u "
+	                "links)",
+	                sv->ops->name, rad_pool_live(&sv->h.elems),
+	                rad_pool_live(&sv->h.links));
+}
+
+rad_status wave_step_end(rad_solver *sv, const rad_wave *w, rad_error *err)
+{
+	int threads = rad_par_threads(sv->par);
+	for (int t = 0; t < threads; t++)
+		sv->stats.rays += w->rays[t];
+	rad_solver_progress(sv, 1.0);
+	if (w->force_store)
+		return rad_fail(err, RAD_ERR_CANCELLED,
+		                "cancelled during refinement; the solution "
+		                "is consistent at the level reached");
+	return RAD_OK;
+}

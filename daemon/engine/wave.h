@@ -1,0 +1,117 @@
+/*
+ * wave.h -- the refinement waves of the hierarchical solvers (hr, rmb):
+ * judging a list of pairs on the worker threads, applying the verdicts in
+ * order on the calling thread.  wave.c says what a wave is and why its
+ * result does not depend on the threads.
+ */
+#ifndef LUXRAD_WAVE_H
+#define LUXRAD_WAVE_H
+
+#include "hr_nodes.h"
+
+/* What judging a pair decided. */
+enum {
+	WAVE_DROP = 0,  /* it carries nothing */
+	WAVE_LEVEL,     /* it carries its transfer at this level (ff) */
+	WAVE_SPLIT,     /* refine the larger end that can be split */
+	WAVE_SPLIT_RCV, /* refine the receiver: the transfer varies over it */
+};
+
+typedef struct wave_verdict {
+	float ff, spread; /* WAVE_LEVEL: form factor, spread (else zero) */
+	uint8_t action;   /* WAVE_* */
+} wave_verdict;
+
+/* A growable array of a solver's items (its pairs), SCRATCH; the size of
+ * an item is the wave's. */
+typedef struct wave_list {
+	void *v;
+	size_t n, cap;
+} wave_list;
+
+typedef struct rad_wave {
+	wave_list todo;        /* items waiting to be judged */
+	wave_list held;        /* hr: the pairs a wave refused, to split next;
+	                          rmb: the wave taken off the top of todo */
+	wave_verdict *verdict; /* one per item of the wave run, SCRATCH */
+	size_t verdict_cap;
+	uint64_t *rays;     /* per-thread ray counters, SCRATCH */
+	uint32_t item_size; /* bytes per item */
+	int force_store;    /* cancelled: pairs stay at the level reached */
+} rad_wave;
+
+/*
+ * Judge one item, on a worker thread: only read the hierarchy, write out
+ * (zeroed before the call) and count rays into *rays; return WAVE_*.
+ * may_split is 0 once the refinement was cancelled.
+ */
+typedef uint8_t (*wave_judge_fn)(rad_solver *sv, const void *item,
+                                 int may_split, wave_verdict *out,
+                                 uint64_t *rays);
+/* Apply an item's verdict, on the calling thread, in list order. */
+typedef rad_status (*wave_apply_fn)(rad_solver *sv, const void *item,
+                                    const wave_verdict *v);
+
+/* Items handed to the waves at once (polygon pairs without clustering,
+ * rmb's stored roots), so that their lists stay bounded. */
+#define WAVE_BLOCK_PAIRS (1u << 20)
+
+/* Set up w for items of item_size bytes; RAD_ERR_NOMEM on failure. */
+rad_status wave_init(rad_solver *sv, rad_wave *w, size_t item_size);
+/* Free everything w holds. */
+void wave_destroy(rad_solver *sv, rad_wave *w);
+/* At the start of a step: ray counters zero, refining allowed. */
+void wave_step_begin(rad_solver *sv, rad_wave *w);
+/* Free the lists and verdicts once a step's refinement is done. */
+void wave_release(rad_solver *sv, rad_wave *w);
+
+/* Append a copy of item to l (w->todo or w->held). */
+rad_status wave_push(rad_solver *sv, const rad_wave *w, wave_list *l,
+                     const void *item);
+/* Move the top n items of todo (the last pushed) to held, in order: a
+ * wave of a work list used as a stack. */
+rad_status wave_take_top(rad_solver *sv, rad_wave *w, size_t n);
+
+/*
+ * Run one wave: judge items[0 .. n) in parallel, then apply the verdicts
+ * in order (stopping at the first failure); once the caller has
+ * cancelled, later waves keep their pairs at their level.
+ */
+rad_status wave_run(rad_solver *sv, rad_wave *w, const void *items, size_t n,
+                    wave_judge_fn judge, wave_apply_fn apply);
+
+/* 1 if either end of the pair can be split. */
+static inline int wave_refinable(const rad_hier *h, uint32_t r, uint32_t s)
+{
+	return node_splittable(h, r) || node_splittable(h, s);
+}
+
+/*
+ * The verdict on a pair at its level whose form factor f (spread sp) was
+ * just computed from sample points, for a source of photopic radiosity b
+ * (as the oracle takes it); fills out when the pair carries light.
+ */
+uint8_t wave_at_level(const rad_solver *sv, uint32_t r, uint32_t s, double b,
+                      double f, double sp, int may_split, wave_verdict *out);
+
+/*
+ * The children pairs of a pair to refine, into kr[k] <- ks[k]: its larger
+ * end that can be split is split (the receiver when rcv_only and it can;
+ * both ends of a cluster's self-link), and an element paired with itself
+ * is left out (planar: F = 0).  Elements are split on demand: the applying
+ * thread only. Returns how many, or -1 when out of memory; *side says which end
+ * was split (1 the receiver, 2 the source, 3 both).
+ */
+#define WAVE_KIDS (RAD_CLUSTER_LEAF_MAX * RAD_CLUSTER_LEAF_MAX)
+int wave_children(rad_hier *h, uint32_t r, uint32_t s, int rcv_only,
+                  uint32_t kr[WAVE_KIDS], uint32_t ks[WAVE_KIDS], int *side);
+
+/* A refinement's failure (out of memory), reported with the pool sizes. */
+rad_status wave_failed(const rad_solver *sv, rad_status rs, rad_error *err);
+/*
+ * End of a step: add the threads' ray counts to the stats, report full
+ * progress, and RAD_ERR_CANCELLED when refinement was cut short.
+ */
+rad_status wave_step_end(rad_solver *sv, const rad_wave *w, rad_error *err);
+
+#endif
