@@ -34,6 +34,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "check.h"
 #include "engine_json.h"
 #include "log.h"
 #include "server.h"
@@ -118,6 +119,7 @@ int srv_job_terminal(srv_job_state st)
 
 int64_t srv_job_memory_locked(const srv_job *j)
 {
+	SRV_HELD(&j->mu);
 	int64_t b = 0;
 	for (int k = 0; k < RAD_MEM_NKINDS; k++)
 		b += j->solver_mem[k];
@@ -126,6 +128,7 @@ int64_t srv_job_memory_locked(const srv_job *j)
 
 void srv_job_raise_cancel_locked(srv_job *j)
 {
+	SRV_HELD(&j->mu);
 	/* Not while replaying: an interrupted replay step would differ
 	 * from the original one.  Requests are checked between steps. */
 	if (!j->replaying)
@@ -134,6 +137,8 @@ void srv_job_raise_cancel_locked(srv_job *j)
 
 void srv_job_enqueue_locked(srv *s, srv_job *j)
 {
+	SRV_HELD(&j->mu);
+	SRV_CHECK(!srv_job_terminal(j->state));
 	if (j->state != SRV_JOB_QUEUED) {
 		j->state = SRV_JOB_QUEUED;
 		j->state_seq++;
@@ -269,6 +274,7 @@ static void publish(srv *s, srv_job *j, int send_event)
 
 json_t *srv_state_event_locked(const srv_job *j)
 {
+	SRV_HELD(&j->mu);
 	json_t *ev = json_object();
 	json_object_set_new(ev, "event", json_string("state"));
 	json_object_set_new(ev, "job", json_integer((json_int_t)j->id));
@@ -293,6 +299,7 @@ static void post_state(srv *s, srv_job *j)
 /* Apply due eps changes (caller holds mu). */
 static int apply_eps_locked(srv_job *j, rad_error *err)
 {
+	SRV_HELD(&j->mu);
 	if (!j->solver)
 		return 0; /* applied once the solver exists */
 	while (j->eps_applied < j->neps &&
@@ -490,6 +497,7 @@ static srv_job_state action_state(job_action a)
 /* Start the solver's deadline for a time budget (caller holds mu). */
 static void arm_budget_locked(srv_job *j)
 {
+	SRV_HELD(&j->mu);
 	j->deadline = j->target.mode == JOB_MODE_SECONDS
 	                      ? rad_seconds() + j->target.left_s
 	                      : 0;

@@ -21,6 +21,7 @@
 #include <sys/eventfd.h>
 #include <unistd.h>
 
+#include "check.h"
 #include "log.h"
 #include "server.h"
 
@@ -39,7 +40,9 @@ static void *pool_main(void *arg)
 		p->head = t->next;
 		if (!p->head)
 			p->tail = NULL;
+		SRV_CHECK(p->queued > 0);
 		p->queued--;
+		SRV_CHECK((p->head == NULL) == (p->queued == 0));
 		pthread_mutex_unlock(&p->mu);
 		t->next = NULL;
 		if (t->run)
@@ -79,6 +82,8 @@ void srv_pool_submit(srv_pool *p, srv_task *t)
 {
 	t->next = NULL;
 	pthread_mutex_lock(&p->mu);
+	SRV_CHECK(!p->stop); /* nothing is queued to a stopped pool */
+	SRV_CHECK((p->head == NULL) == (p->queued == 0));
 	if (p->tail)
 		p->tail->next = t;
 	else
