@@ -200,11 +200,6 @@ int lx_open(lx_ctx *cx)
 	if (rp_addr_parse(text, &a, &err) != 0)
 		return lx_usage_error(cx, "bad address (from %s): %s", from,
 		                      err.msg);
-	if (a.kind == RP_ADDR_TCP && a.port == 0)
-		return lx_usage_error(cx,
-		                      "address '%s' (from %s): port 0 is "
-		                      "only for listening",
-		                      text, from);
 	memset(c, 0, sizeof *c);
 	c->fd = -1;
 	c->next_id = 1;

@@ -244,6 +244,7 @@ int rp_arg_points(const json_t *obj, const char *key, size_t max_points,
 /*
  * Daemon addresses: "unix:/path", "/path" (Unix socket), "tcp:host:port",
  * "host:port", "host" (default port), "[v6]:port".  Pure parsing; no DNS.
+ * Messages name the text and what is wrong in it (see rp_addr.c).
  */
 typedef enum rp_addr_kind { RP_ADDR_TCP = 0, RP_ADDR_UNIX } rp_addr_kind;
 
@@ -254,7 +255,15 @@ typedef struct rp_addr {
 	char path[108]; /* Unix: sun_path */
 } rp_addr;
 
+/* An address to connect to: every form, port 1..65535.  0, or -1 with
+ * err filled (RP_ERR_BAD_REQUEST). */
 int rp_addr_parse(const char *text, rp_addr *out, rp_error *err);
+/*
+ * A TCP listener's address (listen_tcp, metrics_listen, modbus_listen):
+ * HOST:PORT or [V6]:PORT only, the port required, 0 allowed (any free
+ * port).  Same grammar and messages as rp_addr_parse.
+ */
+int rp_addr_parse_listen(const char *text, rp_addr *out, rp_error *err);
 /*
  * 1 if a TCP host is a loopback literal (127.0.0.0/8, ::1,
  * ::ffff:127.x.y.z) or "localhost", and for a Unix socket (local by

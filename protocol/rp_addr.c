@@ -1,6 +1,9 @@
 /*
- * rp_addr.c -- daemon address parsing, shared by the daemon's listeners
- * and the client's --connect.
+ * rp_addr.c -- the one parser of daemon addresses: the client's --connect
+ * and $LUXRAD_CONNECT (rp_addr_parse), and the daemon's TCP listeners,
+ * listen_tcp, metrics_listen and modbus_listen (rp_addr_parse_listen).
+ * One grammar and one set of messages, so that a mistake reads the same
+ * wherever it is made.
  *
  * Accepted forms (no DNS, no sockets: pure text):
  *   unix:PATH         a Unix socket (any non-empty path)
@@ -11,8 +14,9 @@
  *   [V6]:PORT, [V6]   TCP, an IPv6 literal in brackets
  *   V6                an unbracketed IPv6 literal (two or more ':'),
  *                     default port; a port needs the brackets
- * PORT is 0..65535 in decimal; 0 means "any" and only makes sense for a
- * listener.  A path must fit sun_path (at most 107 bytes).
+ * PORT is decimal, 1..65535.  A listener takes the TCP forms with a port
+ * only (a default would hide a typo in a config file), and port 0 too,
+ * "any free port".  A path must fit sun_path (at most 107 bytes).
  */
 #include "rp_int.h"
 
@@ -23,26 +27,35 @@
 #include <string.h>
 #include <strings.h>
 
-static int parse_port(const char *s, const char *text, uint16_t *port,
-                      rp_error *err)
+/* What the address is for (the two entry points). */
+typedef enum addr_use { FOR_CONNECT, FOR_LISTEN } addr_use;
+
+static int parse_port(const char *s, addr_use use, const char *text,
+                      uint16_t *port, rp_error *err)
 {
+	unsigned lo = use == FOR_LISTEN ? 0 : 1;
 	unsigned long v = 0;
 	size_t n = strlen(s);
 
-	if (n == 0 || n > 5 || strspn(s, "0123456789") != n) {
+	if (n == 0 || strspn(s, "0123456789") != n) {
 		rp_fail(err, RP_ERR_BAD_REQUEST,
 		        "address '%.200s': port '%.16s' is not a number "
-		        "0..65535",
-		        text, s);
+		        "%u..65535",
+		        text, s, lo);
 		return -1;
 	}
-	for (size_t i = 0; i < n; i++)
+	for (size_t i = 0; i < n && v <= 65535; i++)
 		v = v * 10 + (unsigned long)(s[i] - '0');
 	if (v > 65535) {
 		rp_fail(err, RP_ERR_BAD_REQUEST,
-		        "address '%.200s': port %lu is out of range "
-		        "0..65535",
-		        text, v);
+		        "address '%.200s': port %.16s is out of range "
+		        "%u..65535",
+		        text, s, lo);
+		return -1;
+	}
+	if (v < lo) {
+		rp_fail(err, RP_ERR_BAD_REQUEST,
+		        "address '%.200s': port 0 is only for listening", text);
 		return -1;
 	}
 	*port = (uint16_t)v;
@@ -51,12 +64,15 @@ static int parse_port(const char *s, const char *text, uint16_t *port,
 
 /* Host names and literals: letters, digits, '-', '.', '_', and for IPv6
  * ':' and '%' (zone).  Spaces, '/', '@' and the rest are typos. */
-static int check_host(const char *h, size_t n, int v6, const char *text,
-                      rp_error *err)
+static int check_host(const char *h, size_t n, int v6, addr_use use,
+                      const char *text, rp_error *err)
 {
 	if (n == 0) {
-		rp_fail(err, RP_ERR_BAD_REQUEST, "address '%.200s': empty host",
-		        text);
+		rp_fail(err, RP_ERR_BAD_REQUEST,
+		        "address '%.200s': empty host%s", text,
+		        use == FOR_LISTEN ? " (0.0.0.0 = every IPv4 interface, "
+		                            "[::] = every IPv6 one)"
+		                          : "");
 		return -1;
 	}
 	if (n > 255) {
@@ -100,8 +116,9 @@ static int parse_unix(const char *path, const char *text, rp_addr *out,
 	return 0;
 }
 
-static int parse_tcp(const char *s, const char *text, rp_addr *out,
-                     rp_error *err)
+/* s without its "tcp:" prefix; text as given, for messages. */
+static int parse_tcp(const char *s, addr_use use, const char *text,
+                     rp_addr *out, rp_error *err)
 {
 	const char *host = s, *port = NULL, *colon;
 	size_t hlen;
@@ -135,19 +152,27 @@ static int parse_tcp(const char *s, const char *text, rp_addr *out,
 	} else {
 		hlen = strlen(s);
 	}
-	if (check_host(host, hlen, v6, text, err) != 0)
+	if (check_host(host, hlen, v6, use, text, err) != 0)
 		return -1;
+	if (!port && use == FOR_LISTEN) {
+		rp_fail(err, RP_ERR_BAD_REQUEST,
+		        "address '%.200s' is not HOST:PORT (IPv6 as "
+		        "[V6]:PORT)",
+		        text);
+		return -1;
+	}
 	out->kind = RP_ADDR_TCP;
 	memcpy(out->host, host, hlen);
 	out->host[hlen] = '\0';
 	out->port = RP_DEFAULT_PORT;
-	if (port && parse_port(port, text, &out->port, err) != 0)
+	if (port && parse_port(port, use, text, &out->port, err) != 0)
 		return -1;
 	return 0;
 }
 
-int rp_addr_parse(const char *text, rp_addr *out, rp_error *err)
+static int parse(const char *text, addr_use use, rp_addr *out, rp_error *err)
 {
+	const char *path;
 	rp_addr a;
 
 	memset(&a, 0, sizeof a);
@@ -155,18 +180,34 @@ int rp_addr_parse(const char *text, rp_addr *out, rp_error *err)
 		rp_fail(err, RP_ERR_BAD_REQUEST, "empty address");
 		return -1;
 	}
-	if (strncmp(text, "unix:", 5) == 0) {
-		if (parse_unix(text + 5, text, &a, err) != 0)
-			return -1;
-	} else if (text[0] == '/' || text[0] == '.') {
-		if (parse_unix(text, text, &a, err) != 0)
+	path = strncmp(text, "unix:", 5) == 0     ? text + 5
+	       : text[0] == '/' || text[0] == '.' ? text
+	                                          : NULL;
+	if (path && use == FOR_LISTEN) {
+		rp_fail(err, RP_ERR_BAD_REQUEST,
+		        "address '%.200s' is a Unix socket path, not HOST:PORT",
+		        text);
+		return -1;
+	}
+	if (path) {
+		if (parse_unix(path, text, &a, err) != 0)
 			return -1;
 	} else if (parse_tcp(strncmp(text, "tcp:", 4) == 0 ? text + 4 : text,
-	                     text, &a, err) != 0) {
+	                     use, text, &a, err) != 0) {
 		return -1;
 	}
 	*out = a;
 	return 0;
+}
+
+int rp_addr_parse(const char *text, rp_addr *out, rp_error *err)
+{
+	return parse(text, FOR_CONNECT, out, err);
+}
+
+int rp_addr_parse_listen(const char *text, rp_addr *out, rp_error *err)
+{
+	return parse(text, FOR_LISTEN, out, err);
 }
 
 /*

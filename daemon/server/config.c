@@ -37,6 +37,7 @@
  */
 #include "config.h"
 #include "rad.h"
+#include "rp.h"
 #include "textutil.h"
 
 #include <errno.h>
@@ -295,52 +296,6 @@ static int parse_size(const char *v, uint64_t *out)
 	return -1;
 }
 
-int srv_hostport_parse(const char *s, char *host, size_t hostlen, int *port,
-                       char *msg, size_t msglen)
-{
-	const char *colon, *h = s;
-	size_t hl;
-	if (s[0] == '[') { /* [v6addr]:port */
-		const char *rb = strchr(s, ']');
-		if (!rb || rb[1] != ':')
-			return srv_fail(
-			        msg, msglen,
-			        "'%s' is not [IPV6]:PORT (e.g. [::1]:7420)", s);
-		h = s + 1;
-		hl = (size_t)(rb - h);
-		colon = rb + 1;
-	} else {
-		colon = strrchr(s, ':');
-		if (!colon || memchr(s, ':', (size_t)(colon - s)))
-			return srv_fail(msg, msglen,
-			                "'%s' is not HOST:PORT (e.g. "
-			                "127.0.0.1:7420; IPv6 as [::1]:7420)",
-			                s);
-		hl = (size_t)(colon - s);
-	}
-	if (hl == 0)
-		return srv_fail(msg, msglen,
-		                "'%s' has no host (0.0.0.0 = every IPv4 "
-		                "interface, [::] = every IPv6 one)",
-		                s);
-	if (hl >= hostlen)
-		return srv_fail(msg, msglen, "'%s': host name too long", s);
-	char *end;
-	errno = 0;
-	long p = strtol(colon + 1, &end, 10);
-	if (colon[1] < '0' || colon[1] > '9' || *end || errno || p > 65535)
-		return srv_fail(msg, msglen,
-		                "'%s': port must be a number in 0..65535", s);
-	for (size_t i = 0; i < hl; i++)
-		if (h[i] <= ' ' || h[i] == '/' || h[i] == '[' || h[i] == ']')
-			return srv_fail(msg, msglen,
-			                "'%s': bad character in host", s);
-	memcpy(host, h, hl);
-	host[hl] = '\0';
-	*port = (int)p;
-	return 0;
-}
-
 /* Store path v (absolute, or made absolute) into dst[size]. */
 static int set_path(char *dst, size_t size, const char *v, char *msg,
                     size_t msglen)
@@ -423,15 +378,16 @@ static int set_number(srv_config *c, const cfg_key *k, const char *v, char *msg,
 static int set_value(srv_config *c, const cfg_key *k, const char *v, char *msg,
                      size_t msglen)
 {
-	char *p = (char *)c + k->off, host[300];
-	int port, b;
+	char *p = (char *)c + k->off;
+	rp_addr a;
+	rp_error e;
+	int b;
 	switch (k->type) {
 	case K_TCP:
 		if (is_none(v))
 			return p[0] = '\0', 0;
-		if (srv_hostport_parse(v, host, sizeof(host), &port, msg,
-		                       msglen) < 0)
-			return -1;
+		if (rp_addr_parse_listen(v, &a, &e) != 0)
+			return srv_fail(msg, msglen, "%s", e.msg);
 		if (copy_str(p, k->size, v) < 0)
 			return srv_fail(msg, msglen, "'%s' is too long", v);
 		return 0;

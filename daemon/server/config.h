@@ -93,13 +93,6 @@ int srv_config_from_args(srv_config *c, int argc, char **argv, char *msg,
  */
 int srv_config_check(const srv_config *c, char *msg, size_t msglen);
 
-/*
- * Split "host:port" / "[v6]:port" (a listen_tcp or metrics_listen value)
- * into host (brackets removed) and port 0..65535.  0, or -1 with msg.
- */
-int srv_hostport_parse(const char *s, char *host, size_t hostlen, int *port,
-                       char *msg, size_t msglen);
-
 /* Print --help (every flag, its default and an example) to stdout. */
 void srv_config_usage(const char *argv0);
 

@@ -5,6 +5,7 @@
  * MB_CONFIG_KEYS in modbus.h.
  */
 #include "modbus.h"
+#include "rp.h"
 #include "textutil.h"
 
 #include <errno.h>
@@ -75,45 +76,18 @@ void mb_config_default(mb_config *c)
 int mb_listen_parse(const char *s, char *host, size_t hostlen, int *port,
                     char *msg, size_t len)
 {
-	const char *h = s, *colon;
-	size_t hl;
+	rp_addr a;
+	rp_error e;
 	*port = 0;
 	if (s[0] == '\0' || strcmp(s, "none") == 0) {
 		host[0] = '\0';
 		return 0;
 	}
-	if (s[0] == '[') { /* [v6]:port */
-		const char *rb = strchr(s, ']');
-		if (!rb || rb[1] != ':')
-			return srv_fail(msg, len, "'%s' is not [IPV6]:PORT", s);
-		h = s + 1;
-		hl = (size_t)(rb - h);
-		colon = rb + 1;
-	} else {
-		colon = strrchr(s, ':');
-		if (!colon || memchr(s, ':', (size_t)(colon - s)))
-			return srv_fail(
-			        msg, len,
-			        "'%s' is not HOST:PORT (127.0.0.1:1502, "
-			        "[::1]:1502) or none",
-			        s);
-		hl = (size_t)(colon - s);
-	}
-	if (hl == 0 || hl >= hostlen)
-		return srv_fail(msg, len, "'%s': %s host", s,
-		                hl ? "too long a" : "no");
-	for (size_t i = 0; i < hl; i++)
-		if (h[i] <= ' ' || h[i] == '/' || h[i] == '[' || h[i] == ']')
-			return srv_fail(msg, len, "'%s': bad character in host",
-			                s);
-	char *end;
-	errno = 0;
-	long p = strtol(colon + 1, &end, 10);
-	if (colon[1] < '0' || colon[1] > '9' || *end || errno || p > 65535)
-		return srv_fail(msg, len, "'%s': port must be 0..65535", s);
-	memcpy(host, h, hl);
-	host[hl] = '\0';
-	*port = (int)p;
+	if (rp_addr_parse_listen(s, &a, &e) != 0)
+		return srv_fail(msg, len, "%s", e.msg);
+	if (snprintf(host, hostlen, "%s", a.host) >= (int)hostlen)
+		return srv_fail(msg, len, "'%s': host too long", s);
+	*port = a.port;
 	return 0;
 }
 

@@ -1,6 +1,8 @@
 # luxrad_modbus: the Modbus TCP server of luxradd (issue 5) -- modbus.c,
 # mb_image.c, mb_config.c, regmap.c (and textutil.c, shared with the
-# daemon's other parsers); the map is documented in MODBUS.md.
+# daemon's other parsers); the map is documented in MODBUS.md.  The
+# listen address is parsed by the protocol library (rp_addr_parse_listen),
+# as the daemon's other listeners are.
 #
 # Included by daemon/server/CMakeLists.txt (include(modbus.cmake)), or by
 # tests/modbus when that line is not there yet.  libmodbus is linked
@@ -16,4 +18,4 @@ add_library(luxrad_modbus STATIC
   ${CMAKE_CURRENT_LIST_DIR}/textutil.c)
 target_include_directories(luxrad_modbus PUBLIC ${CMAKE_CURRENT_LIST_DIR})
 target_link_libraries(luxrad_modbus PRIVATE PkgConfig::LIBMODBUS
-                      PUBLIC Threads::Threads m)
+                      luxrad_protocol PUBLIC Threads::Threads m)

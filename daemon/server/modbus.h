@@ -109,7 +109,8 @@ int mb_config_is_key(const char *key);
 /* The value of key in config-file syntax (for dumps).  0 or -1. */
 int mb_config_get(const mb_config *c, const char *key, char *buf, size_t len);
 
-/* Split "host:port" / "[v6]:port"; "" or "none" gives host "" (off). */
+/* Split "host:port" / "[v6]:port" (rp_addr_parse_listen: port 0 = any
+ * free port); "" or "none" gives host "" (off). */
 int mb_listen_parse(const char *s, char *host, size_t hostlen, int *port,
                     char *msg, size_t len);
 

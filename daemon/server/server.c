@@ -233,9 +233,8 @@ static int listen_tcp(srv *s, const char *spec, int kind, char *msg,
 	char port[16];
 	const char *what = kind == 2 ? "metrics_listen" : "listen_tcp";
 
-	if (rp_addr_parse(spec, &a, &e) != 0 || a.kind != RP_ADDR_TCP) {
-		snprintf(msg, msglen, "%s '%s': %s", what, spec,
-		         e.msg[0] ? e.msg : "not a host:port address");
+	if (rp_addr_parse_listen(spec, &a, &e) != 0) {
+		snprintf(msg, msglen, "%s: %s", what, e.msg);
 		return -1;
 	}
 	hints.ai_socktype = SOCK_STREAM;

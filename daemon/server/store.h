@@ -10,7 +10,7 @@
  *                                    (engine bytes, rad_solution_save);
  *                                    <gen> counts checkpoints, so a new
  *                                    one never overwrites the file the
- *                                    row names (see store.c)
+ *                                    row names (see store_jobs.c)
  * Files are written atomically: a temporary in the same directory,
  * fsync, rename, fsync of the directory.  A row points to a file only
  * after the file is durable, so a crash leaves either the old or the new

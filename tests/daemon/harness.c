@@ -4,6 +4,7 @@
  * in harness_conn.c, helpers in harness_util.c; harness.h has the design.
  */
 #include "harness.h"
+#include "rp.h"
 
 #include <errno.h>
 #include <fcntl.h>
@@ -257,24 +258,16 @@ static void spawn(dm_daemon *d)
 			g_pids[i] = pid;
 }
 
+/* "HOST:PORT" / "[V6]:PORT" of a listener, as luxradd.addr reports it. */
 static int split_hostport(const char *s, char *host, size_t hlen, int *port)
 {
-	const char *colon = strrchr(s, ':');
-	if (!colon)
+	rp_addr a;
+	rp_error err;
+	if (rp_addr_parse(s, &a, &err) != 0 || a.kind != RP_ADDR_TCP ||
+	    snprintf(host, hlen, "%s", a.host) >= (int)hlen)
 		return -1;
-	size_t n = (size_t)(colon - s);
-	if (n >= hlen)
-		return -1;
-	memcpy(host, s, n);
-	host[n] = 0;
-	if (host[0] == '[') { /* [v6] */
-		memmove(host, host + 1, n);
-		char *e = strchr(host, ']');
-		if (e)
-			*e = 0;
-	}
-	*port = atoi(colon + 1);
-	return *port > 0 ? 0 : -1;
+	*port = a.port;
+	return 0;
 }
 
 /* Parse luxradd.addr; 1 when complete (all three listeners), else 0. */

@@ -195,16 +195,25 @@ static void test_arg_points(void **state)
 
 /* ---------------------------------------------------------------- address */
 
-static void expect_tcp(const char *text, const char *host, unsigned port)
+/* rp_addr_parse or rp_addr_parse_listen. */
+typedef int (*addr_parser)(const char *text, rp_addr *out, rp_error *err);
+
+static void expect_tcp_by(addr_parser parse, const char *text, const char *host,
+                          unsigned port)
 {
 	rp_addr a;
 	rp_error err = {0};
 
-	if (rp_addr_parse(text, &a, &err) != 0)
+	if (parse(text, &a, &err) != 0)
 		fail_msg("'%s' refused: %s", text, err.msg);
 	assert_int_equal(a.kind, RP_ADDR_TCP);
 	assert_string_equal(a.host, host);
 	assert_int_equal(a.port, port);
+}
+
+static void expect_tcp(const char *text, const char *host, unsigned port)
+{
+	expect_tcp_by(rp_addr_parse, text, host, port);
 }
 
 static void expect_unix(const char *text, const char *path)
@@ -218,15 +227,22 @@ static void expect_unix(const char *text, const char *path)
 	assert_string_equal(a.path, path);
 }
 
-static void expect_addr_error(const char *text, const char *needle)
+static void expect_error_by(addr_parser parse, const char *text,
+                            const char *needle)
 {
 	rp_addr a;
 	rp_error err = {0};
 
-	if (rp_addr_parse(text, &a, &err) == 0)
+	if (parse(text, &a, &err) == 0)
 		fail_msg("'%s' accepted", text ? text : "(null)");
+	assert_int_equal(err.code, RP_ERR_BAD_REQUEST);
 	if (!strstr(err.msg, needle))
 		fail_msg("message '%s' lacks '%s'", err.msg, needle);
+}
+
+static void expect_addr_error(const char *text, const char *needle)
+{
+	expect_error_by(rp_addr_parse, text, needle);
 }
 
 static void test_address_forms(void **state)
@@ -236,11 +252,12 @@ static void test_address_forms(void **state)
 	expect_tcp("localhost", "localhost", RP_DEFAULT_PORT);
 	expect_tcp("tcp:example.org:80", "example.org", 80);
 	expect_tcp("tcp:db-1.lan", "db-1.lan", RP_DEFAULT_PORT);
-	expect_tcp("0.0.0.0:0", "0.0.0.0", 0);
 	expect_tcp("[::1]:9000", "::1", 9000);
 	expect_tcp("[fe80::1%eth0]", "fe80::1%eth0", RP_DEFAULT_PORT);
 	expect_tcp("::1", "::1", RP_DEFAULT_PORT);
+	expect_tcp("h:1", "h", 1);
 	expect_tcp("h:65535", "h", 65535);
+	expect_tcp("h:007420", "h", 7420);
 	expect_unix("unix:/run/luxradd.sock", "/run/luxradd.sock");
 	expect_unix("unix:rel.sock", "rel.sock");
 	expect_unix("/tmp/x.sock", "/tmp/x.sock");
@@ -261,24 +278,61 @@ static void test_address_errors(void **state)
 	expect_addr_error("", "empty address");
 	expect_addr_error(NULL, "empty address");
 	expect_addr_error("unix:", "empty Unix socket path");
-	expect_addr_error("host:", "not a number");
+	expect_addr_error("host:", "port '' is not a number 1..65535");
 	expect_addr_error("host:-1", "not a number");
 	expect_addr_error("host:+80", "not a number");
 	expect_addr_error("host:80a", "not a number");
-	expect_addr_error("host:65536", "out of range");
-	expect_addr_error("host:123456", "not a number");
+	expect_addr_error("host:80 ", "not a number");
+	expect_addr_error("host:0x50", "not a number");
+	expect_addr_error("host:65536", "port 65536 is out of range 1..65535");
+	expect_addr_error("host:123456", "out of range");
+	expect_addr_error("host:99999999999999999999", "out of range");
+	expect_addr_error("host:0", "port 0 is only for listening");
+	expect_addr_error("[::1]:0", "port 0 is only for listening");
 	expect_addr_error(":7420", "empty host");
 	expect_addr_error("[::1", "without ']'");
+	expect_addr_error("[::1:7420", "without ']'");
 	expect_addr_error("[::1]x", "':PORT'");
+	expect_addr_error("[::1]:80]", "not a number");
 	expect_addr_error("[]:80", "empty host");
 	expect_addr_error("my host:80", "not allowed");
 	expect_addr_error("user@host", "not allowed");
 	expect_addr_error("tcp:/tmp/s", "not allowed");
+	expect_addr_error("tcp:", "empty host");
 
 	char host[300];
 	memset(host, 'h', 299);
 	host[299] = '\0';
 	expect_addr_error(host, "255");
+}
+
+/* Listeners: a port is required, 0 is "any free port", no Unix socket. */
+static void test_address_listen(void **state)
+{
+	(void)state;
+	static const addr_parser L = rp_addr_parse_listen;
+	expect_tcp_by(L, "0.0.0.0:7420", "0.0.0.0", 7420);
+	expect_tcp_by(L, "127.0.0.1:0", "127.0.0.1", 0);
+	expect_tcp_by(L, "[::]:0", "::", 0);
+	expect_tcp_by(L, "[::1]:1502", "::1", 1502);
+	expect_tcp_by(L, "tcp:localhost:7421", "localhost", 7421);
+	expect_tcp_by(L, "my-host.lan:65535", "my-host.lan", 65535);
+
+	expect_error_by(L, "", "empty address");
+	expect_error_by(L, "localhost", "'localhost' is not HOST:PORT");
+	expect_error_by(L, "[::1]", "is not HOST:PORT");
+	expect_error_by(L, "::1:7420", "is not HOST:PORT (IPv6 as [V6]:PORT)");
+	expect_error_by(L, ":7420", "empty host (0.0.0.0 = every IPv4");
+	expect_error_by(L, "[]:7420", "empty host");
+	expect_error_by(L, "h:65536", "port 65536 is out of range 0..65535");
+	expect_error_by(L, "h:x", "port 'x' is not a number 0..65535");
+	expect_error_by(L, "h:", "not a number");
+	expect_error_by(L, "h:80 ", "not a number");
+	expect_error_by(L, "[::1", "'[' without ']'");
+	expect_error_by(L, "[::1]7421", "expected ':PORT' after ']'");
+	expect_error_by(L, "my host:80", "not allowed in a host");
+	expect_error_by(L, "/tmp/s.sock", "is a Unix socket path");
+	expect_error_by(L, "unix:/tmp/s.sock", "is a Unix socket path");
 }
 
 static void test_address_loopback(void **state)
@@ -525,6 +579,7 @@ int main(void)
 	        cmocka_unit_test(test_arg_points),
 	        cmocka_unit_test(test_address_forms),
 	        cmocka_unit_test(test_address_errors),
+	        cmocka_unit_test(test_address_listen),
 	        cmocka_unit_test(test_address_loopback),
 	        cmocka_unit_test(test_token_compare),
 	        cmocka_unit_test(test_grid_spacing_reference_values),
