@@ -61,6 +61,7 @@ typedef struct rmb_state {
  */
 rad_status rmb_refine_gather(rad_solver *sv, rmb_state *st);
 
+/* rmb_nodes.c: */
 /* 1 if no polygon of the node reflects (a pure source, or black). */
 int rmb_node_black(const rad_solver *sv, uint32_t t);
 /* Area of the node's polygons that reflect (rho > 0). */
@@ -72,5 +73,11 @@ double rmb_spread_limit(const rad_solver *sv);
 /* A link the walk deletes: counted unless it was made this iteration, and
  * its pair kept for the study statistics (*rs: out of memory). */
 void rmb_count_deleted(rad_solver *sv, const rad_link *l, rad_status *rs);
+/* Fill black[], arefl[] and rhomax[] for cluster id and below; returns
+ * its reflecting area. */
+double rmb_mark_black(rad_solver *sv, uint32_t id);
+/* The study set: a pair's key, and whether the set holds it. */
+uint64_t rmb_pair_key(uint32_t r, uint32_t s);
+int rmb_set_has(const rmb_set *s, uint64_t k);
 
 #endif
