@@ -26,9 +26,9 @@
 #include <string.h>
 #include <unistd.h>
 
-#include "gltf.h"
 #include "rad.h"
 #include "rp.h"
+#include "sceneio.h"
 
 enum { EXIT_OKAY = 0, EXIT_FAIL = 1, EXIT_USAGE = 2 };
 
@@ -304,12 +304,12 @@ static int load_points(const char *path, point_list *pl)
 	                            : EXIT_FAIL;
 }
 
-static int load_scene(const char *path, rad_scene **sc, rad_gltf_info *info,
+static int load_scene(const char *path, rad_scene **sc, sio_info *info,
                       double *seconds)
 {
 	rad_error err = {0};
 	double t0 = rad_seconds();
-	rad_status st = rad_gltf_load_file(path, sc, info, &err);
+	rad_status st = sio_load_file(path, sc, info, &err);
 	*seconds = rad_seconds() - t0;
 	if (st != RAD_OK) {
 		fprintf(stderr, PROG ": %s: %s: %s\n", path,
@@ -325,7 +325,7 @@ static int load_scene(const char *path, rad_scene **sc, rad_gltf_info *info,
 typedef struct report {
 	const cli_args *a;
 	const rad_scene *scene;
-	const rad_gltf_info *info;
+	const sio_info *info;
 	const point_list *pl;
 	const double *lux, *se;
 	const uint64_t *paths;
@@ -452,7 +452,7 @@ static void print_text(const report *r)
 /* ------------------------------------------------------------------ main */
 
 static int estimate_and_report(const cli_args *a, const rad_scene *sc,
-                               const rad_gltf_info *info, const point_list *pl,
+                               const sio_info *info, const point_list *pl,
                                double load_seconds)
 {
 	size_t n = pl->n ? pl->n : 1;
@@ -509,7 +509,7 @@ int main(int argc, char **argv)
 	cli_args a = {0};
 	point_list pl = {0};
 	rad_scene *sc = NULL;
-	rad_gltf_info info = {0};
+	sio_info info = {0};
 	double load_seconds = 0;
 
 	rad_ref_options_default(&a.opt);

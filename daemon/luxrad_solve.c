@@ -29,9 +29,9 @@
 
 #include "engine_json.h"
 #include "export.h"
-#include "gltf.h"
 #include "rad.h"
 #include "rp.h"
+#include "sceneio.h"
 #include "solve_args.h"
 
 /* ----------------------------------------------------------------- input */
@@ -150,7 +150,7 @@ static json_t *json_vec3(const double v[3])
 }
 
 static json_t *json_scene(const rad_scene *sc, const rad_scene_counts *c,
-                          const rad_gltf_info *g)
+                          const sio_info *g)
 {
 	json_t *o = json_object();
 	double lo[3], hi[3];
@@ -173,7 +173,7 @@ typedef struct report {
 	const cli_args *a;
 	const rad_scene *scene;
 	const rad_scene_counts *counts;
-	const rad_gltf_info *info;
+	const sio_info *info;
 	const run_log *lg;
 	const rad_stats *final;  /* stats after the last iteration */
 	const double *pts;       /* 6 per point, as read */
@@ -305,20 +305,20 @@ static int engine_error(const char *what, const rad_error *err)
 	return EXIT_SOLVE;
 }
 
-static int load_scene(const char *path, rad_scene **sc, rad_gltf_info *info,
+static int load_scene(const char *path, rad_scene **sc, sio_info *info,
                       double *seconds)
 {
 	unsigned char *bytes = NULL;
 	size_t len = 0;
 	rad_error err = {0};
-	rad_status st = rad_file_read(path, &bytes, &len, &err);
+	rad_status st = sio_file_read(path, &bytes, &len, &err);
 
 	if (st != RAD_OK) {
 		fprintf(stderr, "luxrad-solve: %s\n", err.msg);
 		return EXIT_SOLVE;
 	}
 	double t0 = rad_seconds();
-	st = rad_gltf_load(bytes, len, sc, info, &err);
+	st = sio_load(bytes, len, sc, info, &err);
 	*seconds = rad_seconds() - t0;
 	free(bytes);
 	if (st != RAD_OK) {
@@ -380,21 +380,21 @@ bad:
 
 /* --export: the solved mesh as GLB (or .gltf JSON, by the extension). */
 static int export_mesh(const char *path, const rad_scene *sc,
-                       const rad_solver *sv, rad_export_info *info)
+                       const rad_solver *sv, sio_export_info *info)
 {
 	rad_solution *sol = NULL;
 	rad_error err = {0};
-	rad_export_opts o;
+	sio_export_opts o;
 	unsigned char *out = NULL;
 	size_t len = 0, n = strlen(path);
 
-	rad_export_opts_default(&o);
+	sio_export_opts_default(&o);
 	if (n >= 5 && strcmp(path + n - 5, ".gltf") == 0)
-		o.format = RAD_GLTF_JSON;
+		o.format = SIO_FORMAT_JSON;
 	if (rad_solution_new(sv, &sol, &err) != RAD_OK)
 		return engine_error("export", &err);
 	rad_status st =
-	        rad_export_solution(sc, sol, &o, &out, &len, info, &err);
+	        sio_export_solution(sc, sol, &o, &out, &len, info, &err);
 	rad_solution_free(sol);
 	if (st != RAD_OK)
 		return engine_error("export", &err);
@@ -416,7 +416,7 @@ static rad_status query_points(const rad_solver *sv, const point_list *pl,
 }
 
 static int solve_and_report(const cli_args *a, const rad_scene *sc,
-                            const rad_gltf_info *info, const point_list *pl,
+                            const sio_info *info, const point_list *pl,
                             double load_seconds)
 {
 	rad_solver *sv = NULL;
@@ -424,7 +424,7 @@ static int solve_and_report(const cli_args *a, const rad_scene *sc,
 	run_log lg = {.load_seconds = load_seconds};
 	rad_scene_counts counts;
 	rad_stats final;
-	rad_export_info xinfo;
+	sio_export_info xinfo;
 	double *lux = calloc(pl->n ? 2 * pl->n : 1, sizeof(double));
 	double *elux = lux + pl->n, tq = 0;
 	int rc = EXIT_SOLVE;
@@ -487,7 +487,7 @@ int main(int argc, char **argv)
 	cli_args a;
 	point_list pl = {0};
 	rad_scene *sc = NULL;
-	rad_gltf_info info = {0};
+	sio_info info = {0};
 	double load_seconds = 0;
 
 	int rc = cli_parse(argc, argv, &a);

@@ -140,7 +140,7 @@ static mbp_job *job_record(srv *s, srv_job *j)
 	p->err = p->err_prev = p->err_first = NAN;
 	p->iter_s = p->total_s = NAN;
 	for (size_t i = 0; i < j->scene->nsensors; i++) {
-		const rad_gltf_sensor *g = &j->scene->sensors[i];
+		const sio_sensor *g = &j->scene->sensors[i];
 		double pt[6] = {g->position[0], g->position[1], g->position[2],
 		                g->normal[0],   g->normal[1],   g->normal[2]};
 		if (!add_sensor(p, g->name, pt, 0))

@@ -198,10 +198,10 @@ static json_t *run_surfaces(query_task *q, rad_error *err)
 
 static json_t *run_export(query_task *q, rad_error *err)
 {
-	rad_export_opts o;
-	rad_export_info info = {0};
-	rad_export_opts_default(&o);
-	if (rad_export_solution(q->sol->scene->scene, q->sol->sol, &o,
+	sio_export_opts o;
+	sio_export_info info = {0};
+	sio_export_opts_default(&o);
+	if (sio_export_solution(q->sol->scene->scene, q->sol->sol, &o,
 	                        &q->payload, &q->payload_len, &info,
 	                        err) != RAD_OK)
 		return NULL;

@@ -2,7 +2,7 @@
  * scenes.c -- the scene registry and the scene.* commands.
  *
  * A scene arrives as bytes (never a path), is parsed once by
- * rad_gltf_load on the store thread (never on the I/O thread: a large
+ * sio_load on the store thread (never on the I/O thread: a large
  * upload takes seconds), stored (store.h: the bytes as uploaded, so a
  * restart parses them again) and then shared read-only by every job on
  * it.  The upload task takes the connection's input buffer with the
@@ -32,7 +32,7 @@ void srv_scene_unref(srv_scene *sc)
 	if (!sc || atomic_fetch_sub(&sc->refs, 1) != 1)
 		return;
 	rad_scene_free(sc->scene);
-	rad_gltf_sensors_free(sc->sensors);
+	sio_sensors_free(sc->sensors);
 	free(sc);
 }
 
@@ -53,13 +53,13 @@ srv_scene *srv_scene_load(uint64_t id, const char *name, double created,
 		snprintf(err->msg, sizeof(err->msg), "scene: out of memory");
 		return NULL;
 	}
-	if (rad_gltf_load(bytes, len, &sc->scene, &sc->info, err) != RAD_OK) {
+	if (sio_load(bytes, len, &sc->scene, &sc->info, err) != RAD_OK) {
 		free(sc);
 		return NULL;
 	}
 	/* Sensor nodes (Modbus): read from the same bytes at every load, so
 	 * a restart finds them again; a bad declaration refuses the scene. */
-	if (rad_gltf_sensors(bytes, len, &sc->sensors, &sc->nsensors, err) !=
+	if (sio_sensors(bytes, len, &sc->sensors, &sc->nsensors, err) !=
 	    RAD_OK) {
 		rad_scene_free(sc->scene);
 		free(sc);
@@ -120,7 +120,7 @@ static void note(char *out, size_t len, size_t *n, const char *fmt, ...)
 /* The importer's notes in one line. */
 static void warnings_text(const srv_scene *sc, char *out, size_t len)
 {
-	const rad_gltf_info *g = &sc->info;
+	const sio_info *g = &sc->info;
 	size_t n = 0;
 	out[0] = '\0';
 	if (g->primitives_skipped)

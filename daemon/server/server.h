@@ -31,9 +31,9 @@
 #include <stdint.h>
 
 #include "config.h"
-#include "gltf.h"
 #include "rad.h"
 #include "rp.h"
+#include "sceneio.h"
 #include "store.h"
 
 #define SRV_NAME "luxradd"
@@ -55,16 +55,16 @@ typedef struct srv_task srv_task;
  */
 struct srv_scene {
 	atomic_int refs;
-	uint64_t id;              /* the store's id */
-	char name[256];           /* immutable */
-	uint64_t bytes;           /* size uploaded */
-	double created;           /* Unix time */
-	rad_scene *scene;         /* committed: read-only, any thread */
-	rad_scene_counts counts;  /* immutable, read at load */
-	rad_gltf_info info;       /* immutable */
-	double lo[3], hi[3];      /* bounds, immutable */
-	rad_mem_report mem;       /* engine memory, read once after commit */
-	rad_gltf_sensor *sensors; /* declared in the glTF (immutable) */
+	uint64_t id;             /* the store's id */
+	char name[256];          /* immutable */
+	uint64_t bytes;          /* size uploaded */
+	double created;          /* Unix time */
+	rad_scene *scene;        /* committed: read-only, any thread */
+	rad_scene_counts counts; /* immutable, read at load */
+	sio_info info;           /* immutable */
+	double lo[3], hi[3];     /* bounds, immutable */
+	rad_mem_report mem;      /* engine memory, read once after commit */
+	sio_sensor *sensors;     /* declared in the glTF (immutable) */
 	size_t nsensors;
 	int njobs;       /* jobs using it (I/O thread) */
 	srv_scene *next; /* registry list (I/O thread) */

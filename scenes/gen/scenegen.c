@@ -2,7 +2,7 @@
  * scenegen.c -- luxrad-scenegen, the parametric scene generator.
  *
  * Writes the scenes luxrad is tested and measured on as glTF 2.0 (GLB, or
- * .gltf JSON with embedded buffers) through rad_gltf_write: the Cornell box
+ * .gltf JSON with embedded buffers) through sio_write: the Cornell box
  * from its published measurements, a small office, analytic test boxes and
  * rooms, random "field" scenes sized by triangle count, and synthetic
  * stand-ins for the study scenes of the report the engine follows (herd,
@@ -37,7 +37,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "gltf.h"
+#include "sceneio.h"
 
 #define PROG "luxrad-scenegen"
 #define PI 3.14159265358979323846
@@ -403,7 +403,7 @@ static void fbox(mesh *me, frame f, p3 c, p3 h, unsigned omit)
 
 typedef struct params {
 	const char *out;
-	int fmt; /* rad_gltf_format, or -1: from the file name */
+	int fmt; /* sio_format, or -1: from the file name */
 	bool square, help;
 	double sun_lux, rho, emit, scale;
 	double size[3];
@@ -1197,8 +1197,8 @@ static bool parse_value(const opt *o, const char *s, params *p)
 		}
 		return !*rest;
 	case T_FORMAT:
-		*(int *)dst = !strcmp(s, "glb")    ? RAD_GLTF_GLB
-		              : !strcmp(s, "gltf") ? RAD_GLTF_JSON
+		*(int *)dst = !strcmp(s, "glb")    ? SIO_FORMAT_GLB
+		              : !strcmp(s, "gltf") ? SIO_FORMAT_JSON
 		                                   : -1;
 		return *(int *)dst >= 0;
 	case T_SEED: {
@@ -1258,8 +1258,8 @@ static int parse_args(int argc, char **argv, params *p, const kind **kp)
 	if (!p->out)
 		return usage_error("no output file (-o FILE)");
 	if (p->fmt < 0)
-		p->fmt = ends_with(p->out, ".gltf") ? RAD_GLTF_JSON
-		                                    : RAD_GLTF_GLB;
+		p->fmt = ends_with(p->out, ".gltf") ? SIO_FORMAT_JSON
+		                                    : SIO_FORMAT_GLB;
 	*kp = &kinds[k];
 	return -1;
 }
@@ -1321,7 +1321,7 @@ static void print_summary(const scene *sc, const kind *k, const params *p,
 	             "(%g %g %g)..(%g %g %g) m, %zu bytes %s -> %s\n",
 	        k->name, tris, tris - quads, report, sc->nmesh, mats,
 	        sc->nlight, emitting, lo[0], lo[1], lo[2], hi[0], hi[1], hi[2],
-	        bytes, p->fmt == RAD_GLTF_JSON ? "gltf" : "glb", p->out);
+	        bytes, p->fmt == SIO_FORMAT_JSON ? "gltf" : "glb", p->out);
 }
 
 static int write_file(const char *path, const void *bytes, size_t n)
@@ -1345,29 +1345,28 @@ static int write_scene(const scene *sc, const params *p, const kind *k)
 {
 	if (oom)
 		return fail("out of memory while building '%s'", k->name);
-	rad_gltf_mesh *gm = calloc(sc->nmesh ? sc->nmesh : 1, sizeof(*gm));
+	sio_mesh *gm = calloc(sc->nmesh ? sc->nmesh : 1, sizeof(*gm));
 	if (!gm)
 		return fail("out of memory");
 	for (size_t i = 0; i < sc->nmesh; i++) {
 		const mesh *me = sc->mesh[i];
 		double e = me->m.lum > 0 ? 1 : 0;
-		gm[i] = (rad_gltf_mesh){
-		        .name = me->name,
-		        .position = me->pos,
-		        .index = me->idx,
-		        .nvertices = me->nv,
-		        .nindices = me->ni,
-		        .base_color = {me->m.rho[0], me->m.rho[1],
-		                       me->m.rho[2]},
-		        .emissive = {e, e, e},
-		        .emissive_strength = me->m.lum > 0 ? me->m.lum : 1};
+		gm[i] = (sio_mesh){.name = me->name,
+		                   .position = me->pos,
+		                   .index = me->idx,
+		                   .nvertices = me->nv,
+		                   .nindices = me->ni,
+		                   .base_color = {me->m.rho[0], me->m.rho[1],
+		                                  me->m.rho[2]},
+		                   .emissive = {e, e, e},
+		                   .emissive_strength =
+		                           me->m.lum > 0 ? me->m.lum : 1};
 	}
 	void *bytes = NULL;
 	size_t n = 0;
 	rad_error err = {0};
-	rad_status st =
-	        rad_gltf_write(gm, sc->nmesh, sc->light, sc->nlight,
-	                       (rad_gltf_format)p->fmt, &bytes, &n, &err);
+	rad_status st = sio_write(gm, sc->nmesh, sc->light, sc->nlight,
+	                          (sio_format)p->fmt, &bytes, &n, &err);
 	free(gm);
 	if (st != RAD_OK)
 		return fail("glTF export failed (%s): %s", rad_status_name(st),

@@ -3,7 +3,7 @@
  * test: timings on a shared machine are too noisy to assert on).
  *
  * For each scene file given it measures, in this order:
- *   load   rad_gltf_load: parse + scene build + quad merging + BVH
+ *   load   sio_load: parse + scene build + quad merging + BVH
  *   bvh    the BVH alone: the loaded scene's BVH is freed and rebuilt
  *          through the engine's internal vis.h, so the build is timed
  *          without parsing; its memory is Embree's own count (RAD_MEM_BVH)
@@ -22,8 +22,9 @@
 #include <string.h>
 
 #include "engine_json.h"
-#include "gltf.h"
+#include "sceneio.h"
 #include "rad.h"
+#include "sceneio.h"
 #include "vis.h"
 
 typedef struct bench_args {
@@ -122,12 +123,12 @@ static int bench_load(const char *path, rad_scene **sc, bench_result *r)
 	rad_mem_report m;
 	unsigned char *bytes;
 
-	if (rad_file_read(path, &bytes, &r->file_bytes, &err) != RAD_OK) {
+	if (sio_file_read(path, &bytes, &r->file_bytes, &err) != RAD_OK) {
 		fprintf(stderr, "luxrad-bench: %s\n", err.msg);
 		return -1;
 	}
 	double t0 = rad_seconds();
-	rad_status st = rad_gltf_load(bytes, r->file_bytes, sc, NULL, &err);
+	rad_status st = sio_load(bytes, r->file_bytes, sc, NULL, &err);
 	r->load_s = rad_seconds() - t0;
 	free(bytes);
 	if (st == RAD_OK) {

@@ -34,8 +34,8 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "gltf.h"
 #include "rad.h"
+#include "sceneio.h"
 
 typedef struct study_args {
 	rad_options opt;
@@ -274,7 +274,7 @@ static rad_scene *load_scene(const char *path)
 {
 	rad_scene *sc;
 	rad_error err;
-	if (rad_gltf_load_file(path, &sc, NULL, &err)) {
+	if (sio_load_file(path, &sc, NULL, &err)) {
 		fprintf(stderr, "luxrad-study: %s\n", err.msg);
 		return NULL;
 	}

@@ -13,7 +13,7 @@
 #include <cmocka.h>
 
 #include "generated.h"
-#include "gltf.h"
+#include "sceneio.h"
 
 rad_scene *generated_scene(const char *args)
 {
@@ -27,7 +27,7 @@ rad_scene *generated_scene(const char *args)
 	assert_int_equal(system(cmd), 0);
 	rad_scene *s = NULL;
 	rad_error err;
-	if (rad_gltf_load_file(path, &s, NULL, &err) != RAD_OK)
+	if (sio_load_file(path, &s, NULL, &err) != RAD_OK)
 		fail_msg("%s", err.msg);
 	unlink(path);
 	return s;

@@ -19,8 +19,8 @@
 
 #include <cmocka.h>
 
-#include "gltf.h"
 #include "rad.h"
+#include "sceneio.h"
 
 #define MESH_EDGE 0.06 /* fraction of the box diagonal (~58 mm) */
 
@@ -42,7 +42,7 @@ static rad_scene *load_cornell(void)
 	const char *path = LUXRAD_SOURCE_DIR "/scenes/cornell.gltf";
 	rad_scene *s = NULL;
 	rad_error err;
-	rad_status st = rad_gltf_load_file(path, &s, NULL, &err);
+	rad_status st = sio_load_file(path, &s, NULL, &err);
 	if (st)
 		fail_msg("load %s: %s", path, err.msg);
 	return s;

@@ -47,8 +47,8 @@
 #include <cmocka.h>
 
 #include "generated.h"
-#include "gltf.h"
 #include "rad.h"
+#include "sceneio.h"
 
 #define NX 5
 #define NZ 4
@@ -75,7 +75,7 @@ static rad_scene *load_office(void)
 	const char *path = LUXRAD_SOURCE_DIR "/scenes/office.gltf";
 	rad_scene *s = NULL;
 	rad_error err;
-	if (rad_gltf_load_file(path, &s, NULL, &err))
+	if (sio_load_file(path, &s, NULL, &err))
 		fail_msg("load %s: %s", path, err.msg);
 	return s;
 }

@@ -1,9 +1,9 @@
 /*
- * test_gltf.c -- glTF import and export (daemon/scene/gltf.cc).
+ * test_gltf.c -- glTF import and export (daemon/sceneio/gltf.cc).
  *
  * Documents are built here, inline: a small JSON template over a buffer
  * that the test encodes as a base64 data: URI, or GLB bytes produced by
- * rad_gltf_write.  Each bad-input case is the good document with one
+ * sio_write.  Each bad-input case is the good document with one
  * string replaced, so every case differs from a loading document by
  * exactly the defect it names.  The checks read the committed scene
  * through rad.h and, where rad.h has no accessor (materials, lights,
@@ -22,8 +22,8 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "gltf.h"
 #include "scene.h"
+#include "sceneio.h"
 
 /* ------------------------------------------------------------- helpers */
 
@@ -118,11 +118,11 @@ static char *quad_doc(void)
 }
 
 /* Load bytes that must load; the caller frees the scene. */
-static rad_scene *load_ok(const void *bytes, size_t len, rad_gltf_info *info)
+static rad_scene *load_ok(const void *bytes, size_t len, sio_info *info)
 {
 	rad_scene *s = NULL;
 	rad_error err = {0};
-	rad_status st = rad_gltf_load(bytes, len, &s, info, &err);
+	rad_status st = sio_load(bytes, len, &s, info, &err);
 	if (st != RAD_OK)
 		fail_msg("load failed (%s): %s", rad_status_name(st), err.msg);
 	assert_non_null(s);
@@ -144,7 +144,7 @@ static void expect_fail(const void *bytes, size_t len, rad_status want,
 {
 	rad_scene *s = (rad_scene *)1;
 	rad_error err = {0};
-	rad_status st = rad_gltf_load(bytes, len, &s, NULL, &err);
+	rad_status st = sio_load(bytes, len, &s, NULL, &err);
 	if (st != want || !strstr(err.msg, part))
 		fail_msg("got %s '%s', want %s with '%s'", rad_status_name(st),
 		         err.msg, rad_status_name(want), part);
@@ -173,7 +173,7 @@ static void test_quad_loads_as_one_emissive_parallelogram(void **state)
 {
 	(void)state;
 	char *doc = quad_doc();
-	rad_gltf_info info;
+	sio_info info;
 	rad_scene *s = load_ok(doc, strlen(doc), &info);
 	rad_scene_counts c;
 	rad_scene_counts_get(s, &c);
@@ -251,7 +251,7 @@ static void test_points_and_lines_are_skipped_and_counted(void **state)
 	                  "\"material\":0},{\"attributes\":{\"POSITION\":0},"
 	                  "\"mode\":1},{\"attributes\":{\"POSITION\":0},"
 	                  "\"mode\":0}");
-	rad_gltf_info info;
+	sio_info info;
 	rad_scene *s = load_ok(doc, strlen(doc), &info);
 	assert_int_equal(info.primitives, 1);
 	assert_int_equal(info.primitives_skipped, 2);
@@ -271,7 +271,7 @@ static void test_nested_trs_and_matrix_transforms(void **state)
 	        "\"rotation\":[0,0,0.70710678118654752,0.70710678118654752],"
 	        "\"scale\":[2,2,2],\"children\":[1]},{\"name\":\"Panel\","
 	        "\"mesh\":0,\"matrix\":[1,0,0,0,0,1,0,0,0,0,1,0,0,0,5,1]}]");
-	rad_gltf_info info;
+	sio_info info;
 	rad_scene *s = load_ok(doc, strlen(doc), &info);
 	double lo[3], hi[3];
 	rad_scene_bounds(s, lo, hi);
@@ -312,7 +312,7 @@ static void test_materials_default_clamp_and_counters(void **state)
 	        doc, "\"pbrMetallicRoughness\":{",
 	        "\"normalTexture\":{\"index\":0},\"pbrMetallicRoughness\":"
 	        "{\"metallicFactor\":0,\"baseColorTexture\":{\"index\":0},");
-	rad_gltf_info info;
+	sio_info info;
 	rad_scene *s = load_ok(doc, strlen(doc), &info);
 	const rad_material *m = &s->mats[poly0(s)->mat];
 	for (int c = 0; c < 3; c++) {
@@ -580,12 +580,12 @@ static void test_external_uris_are_refused(void **state)
 /* ------------------------------------------------------------- export */
 
 /* A lit floor (indexed, with colours and lux), a lamp, three lights. */
-static rad_status write_sample(rad_gltf_format fmt, void **out, size_t *len)
+static rad_status write_sample(sio_format fmt, void **out, size_t *len)
 {
 	static const float color[12] = {1, 0, 0, 0, 1, 0, 0, 0, 1, 1, 1, 1};
 	static const float lux[4] = {10, 20, 30, 40};
 	static const float lamp[9] = {0, 0, 2, 0, 1, 2, 1, 0, 2};
-	rad_gltf_mesh m[3] = {
+	sio_mesh m[3] = {
 	        {.name = "Floor",
 	         .position = quad_pos,
 	         .color = color,
@@ -620,7 +620,7 @@ static rad_status write_sample(rad_gltf_format fmt, void **out, size_t *len)
 	         .intensity = {100, 100, 100}},
 	};
 	rad_error err = {0};
-	rad_status st = rad_gltf_write(m, 3, l, 3, fmt, out, len, &err);
+	rad_status st = sio_write(m, 3, l, 3, fmt, out, len, &err);
 	if (st != RAD_OK)
 		fail_msg("write: %s", err.msg);
 	return st;
@@ -656,15 +656,15 @@ static void test_glb_and_json_round_trip(void **state)
 	(void)state;
 	void *glb, *json;
 	size_t nglb, njson;
-	write_sample(RAD_GLTF_GLB, &glb, &nglb);
-	write_sample(RAD_GLTF_JSON, &json, &njson);
+	write_sample(SIO_FORMAT_GLB, &glb, &nglb);
+	write_sample(SIO_FORMAT_JSON, &json, &njson);
 	assert_memory_equal(glb, "glTF", 4);
 	assert_int_equal(nglb % 4, 0);
 	assert_int_equal(((const char *)json)[0], '{');
 	assert_non_null(memmem(json, njson, "_ILLUMINANCE", 12));
 	assert_non_null(
 	        memmem(json, njson, "KHR_materials_emissive_strength", 31));
-	rad_gltf_info info;
+	sio_info info;
 	rad_scene *a = load_ok(glb, nglb, &info),
 	          *b = load_ok(json, njson, NULL);
 	assert_int_equal(info.meshes, 2);
@@ -685,7 +685,7 @@ static void test_write_refuses_invalid_meshes_and_lights(void **state)
 	float nan_pos[12];
 	memcpy(nan_pos, quad_pos, sizeof nan_pos);
 	nan_pos[4] = NAN;
-	rad_gltf_mesh m[3] = {
+	sio_mesh m[3] = {
 	        {.name = "A",
 	         .position = quad_pos,
 	         .index = bad_idx,
@@ -713,8 +713,8 @@ static void test_write_refuses_invalid_meshes_and_lights(void **state)
 	size_t len = 1;
 	rad_error err;
 	for (int k = 0; k < 3; k++) {
-		assert_int_equal(rad_gltf_write(&m[k], 1, NULL, 0, RAD_GLTF_GLB,
-		                                &out, &len, &err),
+		assert_int_equal(sio_write(&m[k], 1, NULL, 0, SIO_FORMAT_GLB,
+		                           &out, &len, &err),
 		                 RAD_ERR_INVALID);
 		assert_non_null(strstr(err.msg, want[k]));
 		assert_null(out);
@@ -724,7 +724,7 @@ static void test_write_refuses_invalid_meshes_and_lights(void **state)
 	                    .inner_cone = 0.5,
 	                    .outer_cone = 0.5};
 	assert_int_equal(
-	        rad_gltf_write(NULL, 0, &l, 1, RAD_GLTF_JSON, &out, &len, &err),
+	        sio_write(NULL, 0, &l, 1, SIO_FORMAT_JSON, &out, &len, &err),
 	        RAD_ERR_INVALID);
 	assert_non_null(strstr(err.msg, "light 0"));
 }
@@ -742,7 +742,7 @@ static void test_broken_glb_containers_are_refused(void **state)
 	(void)state;
 	void *glb;
 	size_t n;
-	write_sample(RAD_GLTF_GLB, &glb, &n);
+	write_sample(SIO_FORMAT_GLB, &glb, &n);
 	unsigned char *b = malloc(n);
 	assert_non_null(b);
 
@@ -782,7 +782,7 @@ static void try_mutant(const unsigned char *b, size_t n)
 {
 	rad_scene *s = NULL;
 	rad_error err = {0};
-	rad_status st = rad_gltf_load(b, n, &s, NULL, &err);
+	rad_status st = sio_load(b, n, &s, NULL, &err);
 	if (st == RAD_OK) {
 		assert_non_null(s);
 		rad_scene_free(s);
@@ -803,7 +803,7 @@ static void test_mutated_inputs_never_crash(void **state)
 	(void)state;
 	void *glb;
 	size_t n;
-	write_sample(RAD_GLTF_GLB, &glb, &n);
+	write_sample(SIO_FORMAT_GLB, &glb, &n);
 	char *doc = with_lights();
 	size_t nd = strlen(doc);
 	unsigned char *b = malloc(n > nd ? n : nd);

@@ -33,8 +33,8 @@
 
 #include <cmocka.h>
 
-#include "gltf.h"
 #include "rad.h"
+#include "sceneio.h"
 
 #define MAXPTS 128
 #define REAL_DIR LUXRAD_SOURCE_DIR "/../shared/scenes/real/renderpark/"
@@ -80,7 +80,7 @@ static void hold_room(const char *scene, const char *points,
 	snprintf(path, sizeof(path), "%s%s", REAL_DIR, scene);
 	rad_scene *s = NULL;
 	rad_error err;
-	if (rad_gltf_load_file(path, &s, NULL, &err))
+	if (sio_load_file(path, &s, NULL, &err))
 		fail_msg("%s: %s (the real scenes are read from ../shared "
 		         "beside the clone)",
 		         path, err.msg);

@@ -1,6 +1,6 @@
 /*
  * test_scene.c -- the committed sample scenes and luxrad-scenegen, checked
- * through the importer the daemon uses (rad_gltf_load).
+ * through the importer the daemon uses (sio_load).
  *
  * The samples (scenes/cornell.gltf, scenes/office.gltf) must load with the
  * counts their README promises: triangles in, polygons after the engine's
@@ -27,7 +27,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
-#include "gltf.h"
+#include "sceneio.h"
 
 #define SCENEGEN LUXRAD_BINARY_DIR "/luxrad-scenegen"
 
@@ -38,7 +38,7 @@ static unsigned char *read_all(const char *path, size_t *len)
 {
 	unsigned char *buf;
 	rad_error err;
-	return rad_file_read(path, &buf, len, &err) == RAD_OK ? buf : NULL;
+	return sio_file_read(path, &buf, len, &err) == RAD_OK ? buf : NULL;
 }
 
 /* Load a scene file, fail the test on any error or skipped triangle. */
@@ -46,7 +46,7 @@ static rad_scene *load(const char *path, rad_scene_counts *c)
 {
 	rad_scene *s = NULL;
 	rad_error err = {0};
-	rad_status st = rad_gltf_load_file(path, &s, NULL, &err);
+	rad_status st = sio_load_file(path, &s, NULL, &err);
 	if (st != RAD_OK)
 		fail_msg("%s: %s", path, err.msg);
 	rad_scene_counts_get(s, c);

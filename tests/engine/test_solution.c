@@ -18,8 +18,8 @@
 
 #include <cmocka.h>
 
-#include "gltf.h"
 #include "rad.h"
+#include "sceneio.h"
 
 #define NPTS 6
 
@@ -27,8 +27,8 @@ static rad_scene *load_cornell(void)
 {
 	rad_scene *s = NULL;
 	rad_error err;
-	if (rad_gltf_load_file(LUXRAD_SOURCE_DIR "/scenes/cornell.gltf", &s,
-	                       NULL, &err) != RAD_OK)
+	if (sio_load_file(LUXRAD_SOURCE_DIR "/scenes/cornell.gltf", &s, NULL,
+	                  &err) != RAD_OK)
 		fail_msg("load: %s", err.msg);
 	return s;
 }

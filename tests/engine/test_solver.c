@@ -23,7 +23,7 @@
 #include <unistd.h>
 
 #include "generated.h"
-#include "gltf.h"
+#include "sceneio.h"
 
 #include "rad.h"
 
@@ -423,8 +423,8 @@ static void test_light_zero_link_bound(void **state)
 	(void)state;
 	rad_scene *s = NULL;
 	rad_error err;
-	if (rad_gltf_load_file(LUXRAD_SOURCE_DIR "/scenes/office.gltf", &s,
-	                       NULL, &err) != RAD_OK)
+	if (sio_load_file(LUXRAD_SOURCE_DIR "/scenes/office.gltf", &s, NULL,
+	                  &err) != RAD_OK)
 		fail_msg("%s", err.msg);
 	const rad_solver_kind kinds[2] = {RAD_SOLVER_HR, RAD_SOLVER_RMB};
 	for (int k = 0; k < 2; k++) {

@@ -1,6 +1,6 @@
 /*
- * test_sensors.c -- sensor nodes from glTF (rad_gltf_sensors in
- * daemon/scene/gltf.cc): both ways of declaring one, positions and
+ * test_sensors.c -- sensor nodes from glTF (sio_sensors in
+ * daemon/sceneio/gltf.cc): both ways of declaring one, positions and
  * normals through nested transforms (TRS and matrix), the default scene
  * only, and each bad declaration refused with a message naming it.
  *
@@ -20,7 +20,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "gltf.h"
+#include "sceneio.h"
 
 /*
  * Scene 0 has roots 0 and 3; node 5 is in no scene.
@@ -67,8 +67,7 @@ static char *subst(const char *s, const char *from, const char *to)
 	return r;
 }
 
-static const rad_gltf_sensor *find(const rad_gltf_sensor *s, size_t n,
-                                   const char *name)
+static const sio_sensor *find(const sio_sensor *s, size_t n, const char *name)
 {
 	for (size_t i = 0; i < n; i++)
 		if (strcmp(s[i].name, name) == 0)
@@ -86,29 +85,28 @@ static void near3(const double *got, double x, double y, double z)
 static void test_sensors_from_nested_nodes(void **state)
 {
 	(void)state;
-	rad_gltf_sensor *s = NULL;
+	sio_sensor *s = NULL;
 	size_t n = 99;
 	rad_error err;
-	assert_int_equal(
-	        rad_gltf_sensors(good_doc, strlen(good_doc), &s, &n, &err),
-	        RAD_OK);
+	assert_int_equal(sio_sensors(good_doc, strlen(good_doc), &s, &n, &err),
+	                 RAD_OK);
 	assert_int_equal(n, 4); /* desk, probe, both, wall: not the ghost */
 	assert_null(find(s, n, "ghost"));
-	const rad_gltf_sensor *desk = find(s, n, "desk");
+	const sio_sensor *desk = find(s, n, "desk");
 	assert_non_null(desk);
 	assert_int_equal(desk->node, 1);
 	near3(desk->position, 11, 2, 3);
 	near3(desk->normal, 0, 1, 0);
-	const rad_gltf_sensor *probe = find(s, n, "probe");
+	const sio_sensor *probe = find(s, n, "probe");
 	assert_non_null(probe);
 	assert_int_equal(probe->node, 2);
 	near3(probe->position, 11, 2, 4);
 	near3(probe->normal, 0, 0, 1);
-	const rad_gltf_sensor *wall = find(s, n, "wall");
+	const sio_sensor *wall = find(s, n, "wall");
 	assert_non_null(wall);
 	near3(wall->position, 5, 6, 7);
 	near3(wall->normal, 1, 0, 0); /* scale 3 normalised away */
-	const rad_gltf_sensor *both = find(s, n, "both");
+	const sio_sensor *both = find(s, n, "both");
 	assert_non_null(both);
 	near3(both->position, 10, 0, 0);
 	near3(both->normal, 0, 1, 0);
@@ -117,7 +115,7 @@ static void test_sensors_from_nested_nodes(void **state)
 	assert_string_equal(s[1].name, "probe");
 	assert_string_equal(s[2].name, "both");
 	assert_string_equal(s[3].name, "wall");
-	rad_gltf_sensors_free(s);
+	sio_sensors_free(s);
 }
 
 static void test_no_sensors(void **state)
@@ -125,10 +123,9 @@ static void test_no_sensors(void **state)
 	(void)state;
 	static const char doc[] = "{\"asset\":{\"version\":\"2.0\"},"
 	                          "\"nodes\":[{\"name\":\"sensorless\"}]}";
-	rad_gltf_sensor *s = (rad_gltf_sensor *)1;
+	sio_sensor *s = (sio_sensor *)1;
 	size_t n = 7;
-	assert_int_equal(rad_gltf_sensors(doc, strlen(doc), &s, &n, NULL),
-	                 RAD_OK);
+	assert_int_equal(sio_sensors(doc, strlen(doc), &s, &n, NULL), RAD_OK);
 	assert_null(s);
 	assert_int_equal(n, 0);
 }
@@ -137,10 +134,10 @@ static void test_no_sensors(void **state)
 static void refused(const char *from, const char *to, const char *want)
 {
 	char *doc = subst(good_doc, from, to);
-	rad_gltf_sensor *s = (rad_gltf_sensor *)1;
+	sio_sensor *s = (sio_sensor *)1;
 	size_t n = 7;
 	rad_error err;
-	rad_status st = rad_gltf_sensors(doc, strlen(doc), &s, &n, &err);
+	rad_status st = sio_sensors(doc, strlen(doc), &s, &n, &err);
 	if (st != RAD_ERR_INVALID || !strstr(err.msg, want))
 		fail_msg("'%s' -> '%s': status %d, message '%s', expected "
 		         "'%s'",
@@ -176,12 +173,11 @@ static void test_bad_declarations(void **state)
 	char *doc = subst(good_doc, "sensor:desk",
 	                  "sensor:012345678901234567890123456789012345678901"
 	                  "234567890123456789012");
-	rad_gltf_sensor *s = NULL;
+	sio_sensor *s = NULL;
 	size_t n;
-	assert_int_equal(rad_gltf_sensors(doc, strlen(doc), &s, &n, NULL),
-	                 RAD_OK);
+	assert_int_equal(sio_sensors(doc, strlen(doc), &s, &n, NULL), RAD_OK);
 	assert_int_equal(strlen(s[0].name), 63);
-	rad_gltf_sensors_free(s);
+	sio_sensors_free(s);
 	free(doc);
 }
 
@@ -199,10 +195,10 @@ static void test_bad_geometry(void **state)
 	                  "\"translation\":[1e308,0,0]");
 	char *doc2 = subst(doc, "\"translation\":[1,2,3]",
 	                   "\"translation\":[1e308,2,3]");
-	rad_gltf_sensor *s = NULL;
+	sio_sensor *s = NULL;
 	size_t n;
 	rad_error err;
-	assert_int_equal(rad_gltf_sensors(doc2, strlen(doc2), &s, &n, &err),
+	assert_int_equal(sio_sensors(doc2, strlen(doc2), &s, &n, &err),
 	                 RAD_ERR_INVALID);
 	assert_non_null(strstr(err.msg, "sensor 'desk' (node 1): position is "
 	                                "not finite"));
@@ -212,7 +208,7 @@ static void test_bad_geometry(void **state)
 	doc = subst(good_doc, "\"name\":\"Room\",",
 	            "\"name\":\"Room\",\"scale\":[1e300,1e300,1e300],");
 	doc2 = subst(doc, "\"scale\":[1,1,1]", "\"scale\":[1e300,1e300,1e300]");
-	assert_int_equal(rad_gltf_sensors(doc2, strlen(doc2), &s, &n, &err),
+	assert_int_equal(sio_sensors(doc2, strlen(doc2), &s, &n, &err),
 	                 RAD_ERR_INVALID);
 	assert_non_null(strstr(err.msg, "sensor 'desk' (node 1): normal (the "
 	                                "node's +Y axis in world space) is "
@@ -222,10 +218,9 @@ static void test_bad_geometry(void **state)
 	/* huge but finite: still a unit normal */
 	doc = subst(good_doc, "\"scale\":[1,1,1]",
 	            "\"scale\":[1e200,1e200,1e200]");
-	assert_int_equal(rad_gltf_sensors(doc, strlen(doc), &s, &n, &err),
-	                 RAD_OK);
+	assert_int_equal(sio_sensors(doc, strlen(doc), &s, &n, &err), RAD_OK);
 	near3(find(s, n, "desk")->normal, 0, 1, 0);
-	rad_gltf_sensors_free(s);
+	sio_sensors_free(s);
 	free(doc);
 }
 
@@ -236,15 +231,13 @@ static void test_bad_documents(void **state)
 	        "node 0 'Room': child 60 out of range");
 	refused("\"children\":[2]", "\"children\":[0]", "reached twice");
 	refused("\"scene\":0", "\"scene\":3", "default scene 3 out of range");
-	rad_gltf_sensor *s = NULL;
+	sio_sensor *s = NULL;
 	size_t n;
 	rad_error err;
-	assert_int_equal(rad_gltf_sensors("{", 1, &s, &n, &err),
-	                 RAD_ERR_INVALID);
-	assert_int_equal(rad_gltf_sensors(NULL, 0, &s, &n, &err),
-	                 RAD_ERR_INVALID);
+	assert_int_equal(sio_sensors("{", 1, &s, &n, &err), RAD_ERR_INVALID);
+	assert_int_equal(sio_sensors(NULL, 0, &s, &n, &err), RAD_ERR_INVALID);
 	assert_int_equal(
-	        rad_gltf_sensors(good_doc, strlen(good_doc), NULL, &n, &err),
+	        sio_sensors(good_doc, strlen(good_doc), NULL, &n, &err),
 	        RAD_ERR_INVALID);
 }
 

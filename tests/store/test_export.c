@@ -1,5 +1,5 @@
 /*
- * test_export.c -- the solved mesh as glTF (rad_export_solution): the GLB
+ * test_export.c -- the solved mesh as glTF (sio_export_solution): the GLB
  * is read back here (header, JSON chunk with jansson, BIN chunk) and
  * checked against the solution's leaves:
  *  - one mesh per node, named after it; vertex and triangle counts follow
@@ -23,8 +23,8 @@
 #include <cmocka.h>
 
 #include "export.h"
-#include "gltf.h"
 #include "rad.h"
+#include "sceneio.h"
 
 /* ---------------------------------------------------------- the scene */
 
@@ -244,15 +244,15 @@ static int teardown(void **state)
 }
 
 static unsigned char *export(fixture *f, int flat, double white, size_t *len,
-                             rad_export_info *info)
+                             sio_export_info *info)
 {
-	rad_export_opts o;
+	sio_export_opts o;
 	rad_error err;
 	unsigned char *out;
-	rad_export_opts_default(&o);
+	sio_export_opts_default(&o);
 	o.flat = flat;
 	o.white_lux = white;
-	if (rad_export_solution(f->scene, f->sol, &o, &out, len, info, &err) !=
+	if (sio_export_solution(f->scene, f->sol, &o, &out, len, info, &err) !=
 	    RAD_OK)
 		fail_msg("export: %s", err.msg);
 	return out;
@@ -308,7 +308,7 @@ static void test_flat_carries_each_leaf(void **state)
 {
 	fixture *f = *state;
 	size_t len;
-	rad_export_info info;
+	sio_export_info info;
 	const double white = 100;
 	unsigned char *out = export(f, 1, white, &len, &info);
 	glb g;
@@ -351,7 +351,7 @@ static void test_smooth_averages_neighbours(void **state)
 {
 	fixture *f = *state;
 	size_t len;
-	rad_export_info info;
+	sio_export_info info;
 	unsigned char *out = export(f, 0, 0, &len, &info);
 	glb g;
 	glb_open(&g, out, len);
@@ -398,47 +398,47 @@ static void test_smooth_averages_neighbours(void **state)
 static void test_bad_arguments_are_errors(void **state)
 {
 	fixture *f = *state;
-	rad_export_opts o;
+	sio_export_opts o;
 	rad_error err;
 	unsigned char *out = (unsigned char *)&err;
 	size_t len = 5;
-	rad_export_opts_default(&o);
+	sio_export_opts_default(&o);
 	assert_int_equal(
-	        rad_export_solution(NULL, f->sol, &o, &out, &len, NULL, &err),
+	        sio_export_solution(NULL, f->sol, &o, &out, &len, NULL, &err),
 	        RAD_ERR_INVALID);
-	assert_string_equal(err.msg, "rad_export_solution: scene is NULL");
+	assert_string_equal(err.msg, "sio_export_solution: scene is NULL");
 	assert_null(out);
 	assert_int_equal(len, 0);
 	assert_int_equal(
-	        rad_export_solution(f->scene, NULL, &o, &out, &len, NULL, &err),
+	        sio_export_solution(f->scene, NULL, &o, &out, &len, NULL, &err),
 	        RAD_ERR_INVALID);
-	assert_string_equal(err.msg, "rad_export_solution: solution is NULL");
-	assert_int_equal(rad_export_solution(f->scene, f->sol, &o, NULL, &len,
+	assert_string_equal(err.msg, "sio_export_solution: solution is NULL");
+	assert_int_equal(sio_export_solution(f->scene, f->sol, &o, NULL, &len,
 	                                     NULL, &err),
 	                 RAD_ERR_INVALID);
 	o.white_lux = -1;
-	assert_int_equal(rad_export_solution(f->scene, f->sol, &o, &out, &len,
+	assert_int_equal(sio_export_solution(f->scene, f->sol, &o, &out, &len,
 	                                     NULL, &err),
 	                 RAD_ERR_INVALID);
 	assert_non_null(strstr(err.msg, "white_lux"));
 	o.white_lux = NAN;
-	assert_int_equal(rad_export_solution(f->scene, f->sol, &o, &out, &len,
+	assert_int_equal(sio_export_solution(f->scene, f->sol, &o, &out, &len,
 	                                     NULL, &err),
 	                 RAD_ERR_INVALID);
-	rad_export_opts_default(&o);
-	o.format = (rad_gltf_format)7;
-	assert_int_equal(rad_export_solution(f->scene, f->sol, &o, &out, &len,
+	sio_export_opts_default(&o);
+	o.format = (sio_format)7;
+	assert_int_equal(sio_export_solution(f->scene, f->sol, &o, &out, &len,
 	                                     NULL, &err),
 	                 RAD_ERR_INVALID);
 	assert_non_null(strstr(err.msg, "unknown format 7"));
 	/* NULL options mean the defaults; the .gltf JSON form works too. */
-	assert_int_equal(rad_export_solution(f->scene, f->sol, NULL, &out, &len,
+	assert_int_equal(sio_export_solution(f->scene, f->sol, NULL, &out, &len,
 	                                     NULL, &err),
 	                 RAD_OK);
 	assert_int_equal(rd32(out), 0x46546C67);
 	free(out);
-	o.format = RAD_GLTF_JSON;
-	assert_int_equal(rad_export_solution(f->scene, f->sol, &o, &out, &len,
+	o.format = SIO_FORMAT_JSON;
+	assert_int_equal(sio_export_solution(f->scene, f->sol, &o, &out, &len,
 	                                     NULL, &err),
 	                 RAD_OK);
 	json_t *doc = json_loadb((const char *)out, len, 0, NULL);

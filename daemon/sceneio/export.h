@@ -13,31 +13,31 @@
 
 #include <stddef.h>
 
-#include "gltf.h"
+#include "sceneio.h"
 
 #ifdef __cplusplus
 extern "C" {
 #endif
 
-typedef struct rad_export_opts {
-	rad_gltf_format format; /* GLB (default) or .gltf JSON */
-	double white_lux;       /* tone-map white point; 0 = automatic */
-	int flat;               /* 1: one value per leaf (no vertex sharing);
-	                           0 (default): vertices shared within a node
-	                           get the area-weighted mean of their leaves */
-} rad_export_opts;
+typedef struct sio_export_opts {
+	sio_format format; /* GLB (default) or .gltf JSON */
+	double white_lux;  /* tone-map white point; 0 = automatic */
+	int flat;          /* 1: one value per leaf (no vertex sharing);
+	                      0 (default): vertices shared within a node
+	                      get the area-weighted mean of their leaves */
+} sio_export_opts;
 
-typedef struct rad_export_info {
+typedef struct sio_export_info {
 	size_t meshes, vertices, triangles;
 	double white_lux; /* the white point used */
-} rad_export_info;
+} sio_export_info;
 
-void rad_export_opts_default(rad_export_opts *o);
+void sio_export_opts_default(sio_export_opts *o);
 
 /* Serialize; *out malloc'ed (caller frees).  info may be NULL. */
-rad_status rad_export_solution(const rad_scene *scene, const rad_solution *sol,
-                               const rad_export_opts *o, unsigned char **out,
-                               size_t *len, rad_export_info *info,
+rad_status sio_export_solution(const rad_scene *scene, const rad_solution *sol,
+                               const sio_export_opts *o, unsigned char **out,
+                               size_t *len, sio_export_info *info,
                                rad_error *err);
 
 #ifdef __cplusplus

@@ -10,9 +10,9 @@
 #include <string.h>
 
 #include "../engine/err.h"
-#include "gltf.h"
+#include "sceneio.h"
 
-rad_status rad_file_read(const char *path, unsigned char **out, size_t *len,
+rad_status sio_file_read(const char *path, unsigned char **out, size_t *len,
                          rad_error *err)
 {
 	*out = NULL;
@@ -57,16 +57,16 @@ rad_status rad_file_read(const char *path, unsigned char **out, size_t *len,
 	return RAD_OK;
 }
 
-rad_status rad_gltf_load_file(const char *path, rad_scene **out,
-                              rad_gltf_info *info, rad_error *err)
+rad_status sio_load_file(const char *path, rad_scene **out, sio_info *info,
+                         rad_error *err)
 {
 	unsigned char *bytes;
 	size_t len;
 	*out = NULL;
-	rad_status st = rad_file_read(path, &bytes, &len, err);
+	rad_status st = sio_file_read(path, &bytes, &len, err);
 	if (st)
 		return st;
-	st = rad_gltf_load(bytes, len, out, info, err);
+	st = sio_load(bytes, len, out, info, err);
 	free(bytes);
 	return st;
 }

@@ -1,5 +1,5 @@
 /*
- * gltf.h -- glTF 2.0 import and export, the C face of the one C++ file
+ * sceneio.h -- glTF 2.0 import and export, the C face of the one C++ file
  * (gltf.cc) that uses tinygltf.
  *
  * Import takes bytes (a .gltf JSON document with embedded data: URI
@@ -15,8 +15,8 @@
  * Export writes triangle meshes with optional per-vertex COLOR_0 and a
  * custom _ILLUMINANCE attribute (scalar float, lux) as GLB or .gltf bytes.
  */
-#ifndef LUXRAD_GLTF_H
-#define LUXRAD_GLTF_H
+#ifndef LUXRAD_SCENEIO_H
+#define LUXRAD_SCENEIO_H
 
 #include <stddef.h>
 #include <stdint.h>
@@ -27,32 +27,32 @@
 extern "C" {
 #endif
 
-typedef struct rad_gltf_info {
+typedef struct sio_info {
 	uint32_t meshes, primitives, nodes;
 	uint32_t primitives_skipped; /* non-triangle modes (points, lines) */
 	uint32_t textures_ignored;   /* baseColorTexture etc. present */
 	uint32_t metallic_materials; /* metallicFactor > 0 (treated diffuse) */
 	char warnings[512];          /* tinygltf warnings, truncated */
-} rad_gltf_info;
+} sio_info;
 
 /*
  * Parse bytes and build a committed scene.  info may be NULL.  On error
  * *out is NULL and nothing is leaked.
  */
-rad_status rad_gltf_load(const void *bytes, size_t len, rad_scene **out,
-                         rad_gltf_info *info, rad_error *err);
+rad_status sio_load(const void *bytes, size_t len, rad_scene **out,
+                    sio_info *info, rad_error *err);
 
 /*
  * Read a whole file (scene_file.c): *out is malloc'ed, caller frees with
  * free().  RAD_ERR_IO names the path and the system's reason.  For local
  * tools and tests only: the daemon never reads a path a client names.
  */
-rad_status rad_file_read(const char *path, unsigned char **out, size_t *len,
+rad_status sio_file_read(const char *path, unsigned char **out, size_t *len,
                          rad_error *err);
 
-/* rad_file_read() then rad_gltf_load(). */
-rad_status rad_gltf_load_file(const char *path, rad_scene **out,
-                              rad_gltf_info *info, rad_error *err);
+/* sio_file_read() then sio_load(). */
+rad_status sio_load_file(const char *path, rad_scene **out, sio_info *info,
+                         rad_error *err);
 
 /*
  * Sensors: the points where the daemon publishes illuminance (Modbus).  A
@@ -62,33 +62,33 @@ rad_status rad_gltf_load_file(const char *path, rad_scene **out,
  * world space (glTF's up: an untransformed sensor node measures on a
  * floor facing up), normalised; under a non-uniform scale that is the
  * image of the axis, not the normal of the node's XZ plane.  Nodes are
- * taken from the default scene as rad_gltf_load walks it; a sensor node
+ * taken from the default scene as sio_load walks it; a sensor node
  * may also carry a mesh, which is then geometry as usual.
  */
-#define RAD_GLTF_SENSOR_NAME_MAX 64 /* bytes with the NUL */
+#define SIO_SENSOR_NAME_MAX 64 /* bytes with the NUL */
 
-typedef struct rad_gltf_sensor {
-	char name[RAD_GLTF_SENSOR_NAME_MAX]; /* non-empty, no control chars */
-	double position[3];                  /* metres, world space */
-	double normal[3];                    /* world space, unit length */
-	uint32_t node;                       /* glTF node index */
-} rad_gltf_sensor;
+typedef struct sio_sensor {
+	char name[SIO_SENSOR_NAME_MAX]; /* non-empty, no control chars */
+	double position[3];             /* metres, world space */
+	double normal[3];               /* world space, unit length */
+	uint32_t node;                  /* glTF node index */
+} sio_sensor;
 
 /*
  * Every sensor of the document, in the walk's order (depth first, roots
  * in scene order).  *out is malloc'ed (NULL when there is none), freed
- * with rad_gltf_sensors_free.  RAD_ERR_INVALID names the node for an
+ * with sio_sensors_free.  RAD_ERR_INVALID names the node for an
  * empty, too long or duplicate name, conflicting declarations, a
  * non-string extras.luxrad_sensor, a zero or non-finite normal or a
- * non-finite position, and for every error rad_gltf_load would report
+ * non-finite position, and for every error sio_load would report
  * on the document's parsing or node hierarchy.  Parses the whole
  * document again (the scene's load does not keep it).
  */
-rad_status rad_gltf_sensors(const void *bytes, size_t len,
-                            rad_gltf_sensor **out, size_t *n, rad_error *err);
-void rad_gltf_sensors_free(rad_gltf_sensor *s);
+rad_status sio_sensors(const void *bytes, size_t len, sio_sensor **out,
+                       size_t *n, rad_error *err);
+void sio_sensors_free(sio_sensor *s);
 
-typedef struct rad_gltf_mesh {
+typedef struct sio_mesh {
 	const char *name;      /* node and mesh name; may be NULL */
 	const float *position; /* 3 floats per vertex */
 	const float *color;    /* COLOR_0, 3 floats per vertex (linear); NULL */
@@ -99,21 +99,18 @@ typedef struct rad_gltf_mesh {
 	double emissive[3];       /* emissiveFactor, in [0,1] */
 	double emissive_strength; /* KHR_materials_emissive_strength; 1 = none
 	                           */
-} rad_gltf_mesh;
+} sio_mesh;
 
-typedef enum rad_gltf_format {
-	RAD_GLTF_GLB = 0,
-	RAD_GLTF_JSON
-} rad_gltf_format;
+typedef enum sio_format { SIO_FORMAT_GLB = 0, SIO_FORMAT_JSON } sio_format;
 
 /*
  * Serialize meshes and lights.  *out is malloc'ed (caller frees with
  * free()); JSON output embeds buffers as data: URIs.
  */
-rad_status rad_gltf_write(const rad_gltf_mesh *meshes, size_t nmeshes,
-                          const rad_light_desc *lights, size_t nlights,
-                          rad_gltf_format fmt, void **out, size_t *outlen,
-                          rad_error *err);
+rad_status sio_write(const sio_mesh *meshes, size_t nmeshes,
+                     const rad_light_desc *lights, size_t nlights,
+                     sio_format fmt, void **out, size_t *outlen,
+                     rad_error *err);
 
 #ifdef __cplusplus
 }

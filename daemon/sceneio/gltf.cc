@@ -47,7 +47,7 @@
 #include <string>
 #include <vector>
 
-#include "gltf.h"
+#include "sceneio.h"
 
 extern "C" {
 #include "err.h"
@@ -69,8 +69,8 @@ const char kSensorExtra[] = "luxrad_sensor"; /* or this key in extras */
 /* ------------------------------------------------------------ messages */
 
 /* Append a warning to info->warnings ("; "-separated, truncated). */
-__attribute__((format(printf, 2, 3))) void note(rad_gltf_info *info,
-                                                const char *fmt, ...)
+__attribute__((format(printf, 2, 3))) void note(sio_info *info, const char *fmt,
+                                                ...)
 {
 	if (!info)
 		return;
@@ -285,7 +285,7 @@ rad_status parse_failed(const std::string &msg, const Refusal &r,
 }
 
 rad_status parse(const unsigned char *b, size_t len, tinygltf::Model &m,
-                 rad_gltf_info *info, rad_error *err)
+                 sio_info *info, rad_error *err)
 {
 	bool glb = len >= 4 && memcmp(b, "glTF", 4) == 0;
 	rad_status st = glb ? check_glb(b, len, err) : RAD_OK;
@@ -326,7 +326,7 @@ rad_status check_required(const tinygltf::Model &m, rad_error *err)
 }
 
 /* Fill the info counters that depend on the materials alone. */
-void count_materials(const tinygltf::Model &m, rad_gltf_info *info)
+void count_materials(const tinygltf::Model &m, sio_info *info)
 {
 	if (!info)
 		return;
@@ -390,13 +390,13 @@ void mat_point(const Mat4 &a, const float p[3], double out[3])
 struct Loader {
 	const tinygltf::Model &m;
 	rad_scene *s;
-	rad_gltf_info *info;          /* may be NULL */
+	sio_info *info;               /* may be NULL */
 	rad_error *err;               /* may be NULL */
 	std::vector<int64_t> mat_ids; /* [glTF material + 1]: id, or -1 */
 	std::vector<double> batch;    /* triangles waiting for the builder */
 	uint64_t triangles;           /* offered so far (counts are 32-bit) */
-	/* rad_gltf_sensors: collect sensor nodes here instead of building */
-	std::vector<rad_gltf_sensor> *sensors = nullptr;
+	/* sio_sensors: collect sensor nodes here instead of building */
+	std::vector<sio_sensor> *sensors = nullptr;
 	std::map<std::string, int> sensor_node{}; /* name -> declaring node */
 };
 
@@ -985,11 +985,11 @@ rad_status sensor_name(const Loader &L, int ni, std::string *name)
 		return rad_fail(L.err, RAD_ERR_INVALID,
 		                "node %d '%s': empty sensor name", ni,
 		                node_name(L, ni));
-	if (name->size() >= RAD_GLTF_SENSOR_NAME_MAX)
+	if (name->size() >= SIO_SENSOR_NAME_MAX)
 		return rad_fail(L.err, RAD_ERR_INVALID,
 		                "node %d: sensor name of %zu bytes (at most "
 		                "%d)",
-		                ni, name->size(), RAD_GLTF_SENSOR_NAME_MAX - 1);
+		                ni, name->size(), SIO_SENSOR_NAME_MAX - 1);
 	for (unsigned char ch : *name)
 		if (ch < 0x20 || ch == 0x7F)
 			return rad_fail(L.err, RAD_ERR_INVALID,
@@ -1006,7 +1006,7 @@ rad_status visit_sensor(Loader &L, int ni, const Mat4 &w)
 	rad_status st = sensor_name(L, ni, &name);
 	if (st != RAD_OK || name.empty())
 		return st;
-	rad_gltf_sensor g = {};
+	sio_sensor g = {};
 	memcpy(g.name, name.c_str(), name.size() + 1);
 	g.node = (uint32_t)ni;
 	/* Scaled by the largest component first: a huge but finite axis
@@ -1147,7 +1147,7 @@ rad_status walk_scene(Loader &L)
 
 /* Parse, check, build and commit; *s is freed by the caller on error. */
 rad_status load(const unsigned char *b, size_t len, rad_scene **s,
-                rad_gltf_info *info, rad_error *err)
+                sio_info *info, rad_error *err)
 {
 	tinygltf::Model m;
 	rad_status st = parse(b, len, m, info, err);
@@ -1172,15 +1172,14 @@ rad_status load(const unsigned char *b, size_t len, rad_scene **s,
 
 } // namespace
 
-extern "C" rad_status rad_gltf_load(const void *bytes, size_t len,
-                                    rad_scene **out, rad_gltf_info *info,
-                                    rad_error *err)
+extern "C" rad_status sio_load(const void *bytes, size_t len, rad_scene **out,
+                               sio_info *info, rad_error *err)
 {
 	rad_error_clear(err);
 	if (info)
 		memset(info, 0, sizeof *info);
 	if (!out)
-		return rad_fail(err, RAD_ERR_INVALID, "rad_gltf_load: no out");
+		return rad_fail(err, RAD_ERR_INVALID, "sio_load: no out");
 	*out = nullptr;
 	if (!bytes || len == 0)
 		return rad_fail(err, RAD_ERR_INVALID,
@@ -1219,7 +1218,7 @@ namespace
 {
 
 rad_status find_sensors(const unsigned char *b, size_t len,
-                        std::vector<rad_gltf_sensor> *out, rad_error *err)
+                        std::vector<sio_sensor> *out, rad_error *err)
 {
 	tinygltf::Model m;
 	rad_status st = parse(b, len, m, nullptr, err);
@@ -1233,14 +1232,12 @@ rad_status find_sensors(const unsigned char *b, size_t len,
 
 } // namespace
 
-extern "C" rad_status rad_gltf_sensors(const void *bytes, size_t len,
-                                       rad_gltf_sensor **out, size_t *n,
-                                       rad_error *err)
+extern "C" rad_status sio_sensors(const void *bytes, size_t len,
+                                  sio_sensor **out, size_t *n, rad_error *err)
 {
 	rad_error_clear(err);
 	if (!out || !n)
-		return rad_fail(err, RAD_ERR_INVALID,
-		                "rad_gltf_sensors: no out");
+		return rad_fail(err, RAD_ERR_INVALID, "sio_sensors: no out");
 	*out = nullptr;
 	*n = 0;
 	if (!bytes || len == 0)
@@ -1251,7 +1248,7 @@ extern "C" rad_status rad_gltf_sensors(const void *bytes, size_t len,
 		                "input of %zu bytes: glTF over 4 GiB is not "
 		                "supported",
 		                len);
-	std::vector<rad_gltf_sensor> v;
+	std::vector<sio_sensor> v;
 	rad_status st;
 	try {
 		st = find_sensors(static_cast<const unsigned char *>(bytes),
@@ -1267,7 +1264,7 @@ extern "C" rad_status rad_gltf_sensors(const void *bytes, size_t len,
 	}
 	if (st != RAD_OK || v.empty())
 		return st;
-	*out = static_cast<rad_gltf_sensor *>(malloc(v.size() * sizeof v[0]));
+	*out = static_cast<sio_sensor *>(malloc(v.size() * sizeof v[0]));
 	if (!*out)
 		return rad_fail(err, RAD_ERR_NOMEM,
 		                "out of memory for %zu sensors", v.size());
@@ -1276,7 +1273,7 @@ extern "C" rad_status rad_gltf_sensors(const void *bytes, size_t len,
 	return RAD_OK;
 }
 
-extern "C" void rad_gltf_sensors_free(rad_gltf_sensor *s)
+extern "C" void sio_sensors_free(sio_sensor *s)
 {
 	free(s);
 }
@@ -1310,7 +1307,7 @@ bool in_range(const double v[3], double lo, double hi)
 }
 
 /* Refuse what would make the output invalid glTF. */
-rad_status check_mesh(const rad_gltf_mesh &g, size_t i, rad_error *err)
+rad_status check_mesh(const sio_mesh &g, size_t i, rad_error *err)
 {
 	size_t nv = g.nvertices;
 	const char *bad = nullptr;
@@ -1382,7 +1379,7 @@ void add_node(tinygltf::Model &m, tinygltf::Node &&n)
  * emissive factor above 1 (not allowed by glTF) is folded into
  * emissive_strength, which keeps the luminance.
  */
-int write_material(Writer &W, const rad_gltf_mesh &g)
+int write_material(Writer &W, const sio_mesh &g)
 {
 	double e[3], strength = g.emissive_strength;
 	double emax =
@@ -1417,7 +1414,7 @@ int write_material(Writer &W, const rad_gltf_mesh &g)
 	return idx;
 }
 
-rad_status write_mesh(Writer &W, const rad_gltf_mesh &g, size_t i)
+rad_status write_mesh(Writer &W, const sio_mesh &g, size_t i)
 {
 	if (g.nvertices == 0 && g.nindices == 0)
 		return RAD_OK; /* nothing to draw; glTF forbids empty data */
@@ -1537,9 +1534,9 @@ rad_status write_light(Writer &W, const rad_light_desc &d, size_t i)
 	return RAD_OK;
 }
 
-rad_status write(const rad_gltf_mesh *meshes, size_t nmeshes,
-                 const rad_light_desc *lights, size_t nlights,
-                 rad_gltf_format fmt, std::string *bytes, rad_error *err)
+rad_status write(const sio_mesh *meshes, size_t nmeshes,
+                 const rad_light_desc *lights, size_t nlights, sio_format fmt,
+                 std::string *bytes, rad_error *err)
 {
 	Writer W;
 	W.err = err;
@@ -1575,8 +1572,8 @@ rad_status write(const rad_gltf_mesh *meshes, size_t nmeshes,
 		W.m.extensionsUsed.push_back(kLightsExt);
 	std::stringstream ss;
 	tinygltf::TinyGLTF writer;
-	if (!writer.WriteGltfSceneToStream(&W.m, ss, fmt == RAD_GLTF_JSON,
-	                                   fmt == RAD_GLTF_GLB))
+	if (!writer.WriteGltfSceneToStream(&W.m, ss, fmt == SIO_FORMAT_JSON,
+	                                   fmt == SIO_FORMAT_GLB))
 		return rad_fail(err, RAD_ERR_INVALID,
 		                "tinygltf could not serialize the model");
 	*bytes = ss.str();
@@ -1585,17 +1582,16 @@ rad_status write(const rad_gltf_mesh *meshes, size_t nmeshes,
 
 } // namespace
 
-extern "C" rad_status rad_gltf_write(const rad_gltf_mesh *meshes,
-                                     size_t nmeshes,
-                                     const rad_light_desc *lights,
-                                     size_t nlights, rad_gltf_format fmt,
-                                     void **out, size_t *outlen, rad_error *err)
+extern "C" rad_status sio_write(const sio_mesh *meshes, size_t nmeshes,
+                                const rad_light_desc *lights, size_t nlights,
+                                sio_format fmt, void **out, size_t *outlen,
+                                rad_error *err)
 {
 	rad_error_clear(err);
 	if (!out || !outlen || (nmeshes && !meshes) || (nlights && !lights) ||
-	    (fmt != RAD_GLTF_GLB && fmt != RAD_GLTF_JSON))
+	    (fmt != SIO_FORMAT_GLB && fmt != SIO_FORMAT_JSON))
 		return rad_fail(err, RAD_ERR_INVALID,
-		                "rad_gltf_write: bad arguments");
+		                "sio_write: bad arguments");
 	*out = nullptr;
 	*outlen = 0;
 	std::string bytes;

@@ -329,10 +329,10 @@ static rad_status build_mesh(mesh_acc *m, const leaf *const *lv, size_t n,
 
 /* ------------------------------------------------------------------ API */
 
-void rad_export_opts_default(rad_export_opts *o)
+void sio_export_opts_default(sio_export_opts *o)
 {
 	memset(o, 0, sizeof(*o));
-	o->format = RAD_GLTF_GLB;
+	o->format = SIO_FORMAT_GLB;
 	o->white_lux = 0;
 	o->flat = 0;
 }
@@ -394,9 +394,9 @@ static rad_status collect(const rad_solution *sol, leaf_list *L, rad_error *err)
 
 /* Build every node's mesh and serialize. */
 static rad_status write_meshes(const rad_scene *scene, const leaf_list *L,
-                               const rad_export_opts *o, double white,
+                               const sio_export_opts *o, double white,
                                unsigned char **out, size_t *len,
-                               rad_export_info *info, rad_error *err)
+                               sio_export_info *info, rad_error *err)
 {
 	const leaf **order = NULL;
 	size_t *start = NULL;
@@ -412,7 +412,7 @@ static rad_status write_meshes(const rad_scene *scene, const leaf_list *L,
 	}
 	double cell = WELD_REL * (size > 0 ? size : 1);
 	mesh_acc *acc = calloc(nn ? nn : 1, sizeof(*acc));
-	rad_gltf_mesh *gm = calloc(nn ? nn : 1, sizeof(*gm));
+	sio_mesh *gm = calloc(nn ? nn : 1, sizeof(*gm));
 	char(*names)[32] = calloc(nn ? nn : 1, sizeof(*names));
 	size_t nm = 0, nverts = 0, ntris = 0;
 	if (!acc || !gm || !names)
@@ -428,27 +428,26 @@ static rad_status write_meshes(const rad_scene *scene, const leaf_list *L,
 			snprintf(names[k], sizeof(names[k]), "node%u", k);
 			name = names[k];
 		}
-		gm[nm] = (rad_gltf_mesh){.name = name,
-		                         .position = acc[k].pos,
-		                         .color = acc[k].color,
-		                         .illuminance = acc[k].lux,
-		                         .index = acc[k].index,
-		                         .nvertices = acc[k].nv,
-		                         .nindices = acc[k].ni,
-		                         .base_color = {1, 1, 1},
-		                         .emissive_strength = 1};
+		gm[nm] = (sio_mesh){.name = name,
+		                    .position = acc[k].pos,
+		                    .color = acc[k].color,
+		                    .illuminance = acc[k].lux,
+		                    .index = acc[k].index,
+		                    .nvertices = acc[k].nv,
+		                    .nindices = acc[k].ni,
+		                    .base_color = {1, 1, 1},
+		                    .emissive_strength = 1};
 		nm++;
 		nverts += acc[k].nv;
 		ntris += acc[k].ni / 3;
 	}
 	void *bytes = NULL;
 	if (st == RAD_OK)
-		st = rad_gltf_write(gm, nm, NULL, 0, o->format, &bytes, len,
-		                    err);
+		st = sio_write(gm, nm, NULL, 0, o->format, &bytes, len, err);
 	if (st == RAD_OK) {
 		*out = bytes;
 		if (info)
-			*info = (rad_export_info){nm, nverts, ntris, white};
+			*info = (sio_export_info){nm, nverts, ntris, white};
 	}
 	for (uint32_t k = 0; acc && k < nn; k++)
 		mesh_free(&acc[k]);
@@ -460,12 +459,12 @@ static rad_status write_meshes(const rad_scene *scene, const leaf_list *L,
 	return st;
 }
 
-rad_status rad_export_solution(const rad_scene *scene, const rad_solution *sol,
-                               const rad_export_opts *o, unsigned char **out,
-                               size_t *len, rad_export_info *info,
+rad_status sio_export_solution(const rad_scene *scene, const rad_solution *sol,
+                               const sio_export_opts *o, unsigned char **out,
+                               size_t *len, sio_export_info *info,
                                rad_error *err)
 {
-	rad_export_opts def;
+	sio_export_opts def;
 	leaf_list L = {0};
 	double white;
 	rad_error_clear(err);
@@ -475,16 +474,16 @@ rad_status rad_export_solution(const rad_scene *scene, const rad_solution *sol,
 		*len = 0;
 	if (!scene || !sol || !out || !len)
 		return rad_fail(err, RAD_ERR_INVALID,
-		                "rad_export_solution: %s is NULL",
+		                "sio_export_solution: %s is NULL",
 		                !scene ? "scene"
 		                : !sol ? "solution"
 		                : !out ? "out"
 		                       : "len");
 	if (!o) {
-		rad_export_opts_default(&def);
+		sio_export_opts_default(&def);
 		o = &def;
 	}
-	if (o->format != RAD_GLTF_GLB && o->format != RAD_GLTF_JSON)
+	if (o->format != SIO_FORMAT_GLB && o->format != SIO_FORMAT_JSON)
 		return rad_fail(err, RAD_ERR_INVALID,
 		                "export: unknown format %d", (int)o->format);
 	if (!(o->white_lux >= 0) || !isfinite(o->white_lux))
