@@ -22,7 +22,6 @@
 #include <string.h>
 
 #include "engine_json.h"
-#include "sceneio.h"
 #include "rad.h"
 #include "sceneio.h"
 #include "vis.h"
