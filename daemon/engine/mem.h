@@ -17,7 +17,7 @@
  * or id taken once stays valid while the pool grows.  Only the block table
  * is reallocated, and only while the pool grows.
  * Growing (rad_pool_add) is not thread-safe; the engine grows pools from
- * one thread only (see the DESIGN note in hr.c).
+ * one thread only (see wave.c).
  */
 #ifndef LUXRAD_MEM_H
 #define LUXRAD_MEM_H

@@ -1,6 +1,6 @@
 /*
  * wave.c -- the refinement waves of the hierarchical solvers (wave.h),
- * shared by hr (hr.c) and rmb (rmb.c).
+ * shared by hr (hr_refine.c) and rmb (rmb_refine.c).
  *
  * A wave is a list of items -- pairs (receiver, source), with whatever a
  * solver keeps beside them -- that the refinement judges at once.
