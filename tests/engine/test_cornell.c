@@ -197,7 +197,7 @@ static void test_clusters_keep_direct_light(void **state)
  * receiver budget used to shrink with each increment, and the Cornell box
  * converged at eps 1e-4 went from 6,669 to 111,789 elements over
  * iterations 5-9 (2.6 s) for no gain in accuracy; with the floor of
- * rmb.c's spread_limit it keeps 3,221.
+ * rmb_spread_limit (rmb_nodes.c) it keeps 3,221.
  */
 static void test_rmb_late_increments_stay_coarse(void **state)
 {
