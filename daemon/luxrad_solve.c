@@ -318,7 +318,7 @@ static int load_scene(const char *path, rad_scene **sc, sio_info *info,
 		return EXIT_SOLVE;
 	}
 	double t0 = rad_seconds();
-	st = sio_load(bytes, len, sc, info, &err);
+	st = sio_load(bytes, len, sc, info, NULL, NULL, &err);
 	*seconds = rad_seconds() - t0;
 	free(bytes);
 	if (st != RAD_OK) {

@@ -66,7 +66,7 @@ rad_status sio_load_file(const char *path, rad_scene **out, sio_info *info,
 	rad_status st = sio_file_read(path, &bytes, &len, err);
 	if (st)
 		return st;
-	st = sio_load(bytes, len, out, info, err);
+	st = sio_load(bytes, len, out, info, NULL, NULL, err);
 	free(bytes);
 	return st;
 }

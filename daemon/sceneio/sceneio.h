@@ -1,19 +1,22 @@
 /*
- * sceneio.h -- glTF 2.0 import and export, the C face of the one C++ file
- * (gltf.cc) that uses tinygltf.
+ * sceneio.h -- the scene library: glTF 2.0 in and out of the engine.
  *
  * Import takes bytes (a .gltf JSON document with embedded data: URI
- * buffers, or a .glb), never a path: external URIs are refused.  It builds
- * and commits a rad_scene: every mesh primitive of mode TRIANGLES in the
- * default scene (or all root nodes when there is none), with node
- * transforms (matrix or TRS, nested) applied; materials from
- * baseColorFactor (reflectance) and emissiveFactor x
- * KHR_materials_emissive_strength (luminance, cd/m2); KHR_lights_punctual
- * lights.  Malformed input gets RAD_ERR_INVALID and a message naming the
- * accessor / mesh / node and what is wrong.
+ * buffers, or a .glb), never a path: external URIs are refused.  One
+ * parse builds and commits a rad_scene and reads the document's sensor
+ * nodes: every mesh primitive of mode TRIANGLES in the default scene (or
+ * all root nodes when there is none), with node transforms (matrix or
+ * TRS, nested) applied; materials from baseColorFactor (reflectance) and
+ * emissiveFactor x KHR_materials_emissive_strength (luminance, cd/m2);
+ * KHR_lights_punctual lights.  Malformed input gets RAD_ERR_INVALID and a
+ * message naming the accessor / mesh / node and what is wrong.
  *
  * Export writes triangle meshes with optional per-vertex COLOR_0 and a
- * custom _ILLUMINANCE attribute (scalar float, lux) as GLB or .gltf bytes.
+ * custom _ILLUMINANCE attribute (scalar float, lux) as GLB or .gltf bytes
+ * (export.h builds them from a solution).
+ *
+ * tinygltf is behind one small C++ file (gltf_shim.cc); the rest of the
+ * library is C (README.md lists the files).
  */
 #ifndef LUXRAD_SCENEIO_H
 #define LUXRAD_SCENEIO_H
@@ -36,25 +39,6 @@ typedef struct sio_info {
 } sio_info;
 
 /*
- * Parse bytes and build a committed scene.  info may be NULL.  On error
- * *out is NULL and nothing is leaked.
- */
-rad_status sio_load(const void *bytes, size_t len, rad_scene **out,
-                    sio_info *info, rad_error *err);
-
-/*
- * Read a whole file (scene_file.c): *out is malloc'ed, caller frees with
- * free().  RAD_ERR_IO names the path and the system's reason.  For local
- * tools and tests only: the daemon never reads a path a client names.
- */
-rad_status sio_file_read(const char *path, unsigned char **out, size_t *len,
-                         rad_error *err);
-
-/* sio_file_read() then sio_load(). */
-rad_status sio_load_file(const char *path, rad_scene **out, sio_info *info,
-                         rad_error *err);
-
-/*
  * Sensors: the points where the daemon publishes illuminance (Modbus).  A
  * node declares one by its name, "sensor:<name>", or by its extras,
  * {"luxrad_sensor": "<name>"} (both on one node must agree).  The sensor
@@ -75,18 +59,38 @@ typedef struct sio_sensor {
 } sio_sensor;
 
 /*
- * Every sensor of the document, in the walk's order (depth first, roots
- * in scene order).  *out is malloc'ed (NULL when there is none), freed
- * with sio_sensors_free.  RAD_ERR_INVALID names the node for an
- * empty, too long or duplicate name, conflicting declarations, a
- * non-string extras.luxrad_sensor, a zero or non-finite normal or a
- * non-finite position, and for every error sio_load would report
- * on the document's parsing or node hierarchy.  Parses the whole
- * document again (the scene's load does not keep it).
+ * Parse bytes once; build and commit the scene and read its sensors.
+ *
+ * scene: where the committed scene goes, or NULL to read the sensors
+ * alone (the document is then checked only as far as sensors need: its
+ * parsing and node hierarchy, not meshes, materials or lights).  info
+ * may be NULL.  sensors and nsensors: both NULL for none, else every
+ * sensor of the document in the walk's order (depth first, roots in
+ * scene order); *sensors is malloc'ed (NULL when there is none), freed
+ * with sio_sensors_free.
+ *
+ * RAD_ERR_INVALID names the node for an empty, too long or duplicate
+ * sensor name, conflicting declarations, a non-string
+ * extras.luxrad_sensor, a zero or non-finite normal or a non-finite
+ * position.  A document that fails as a scene reports the scene's error
+ * first.  On error every output is NULL or 0 and nothing is leaked.
  */
-rad_status sio_sensors(const void *bytes, size_t len, sio_sensor **out,
-                       size_t *n, rad_error *err);
+rad_status sio_load(const void *bytes, size_t len, rad_scene **scene,
+                    sio_info *info, sio_sensor **sensors, size_t *nsensors,
+                    rad_error *err);
 void sio_sensors_free(sio_sensor *s);
+
+/*
+ * Read a whole file (scene_file.c): *out is malloc'ed, caller frees with
+ * free().  RAD_ERR_IO names the path and the system's reason.  For local
+ * tools and tests only: the daemon never reads a path a client names.
+ */
+rad_status sio_file_read(const char *path, unsigned char **out, size_t *len,
+                         rad_error *err);
+
+/* sio_file_read() then sio_load() without sensors. */
+rad_status sio_load_file(const char *path, rad_scene **out, sio_info *info,
+                         rad_error *err);
 
 typedef struct sio_mesh {
 	const char *name;      /* node and mesh name; may be NULL */

@@ -53,15 +53,11 @@ srv_scene *srv_scene_load(uint64_t id, const char *name, double created,
 		snprintf(err->msg, sizeof(err->msg), "scene: out of memory");
 		return NULL;
 	}
-	if (sio_load(bytes, len, &sc->scene, &sc->info, err) != RAD_OK) {
-		free(sc);
-		return NULL;
-	}
-	/* Sensor nodes (Modbus): read from the same bytes at every load, so
-	 * a restart finds them again; a bad declaration refuses the scene. */
-	if (sio_sensors(bytes, len, &sc->sensors, &sc->nsensors, err) !=
-	    RAD_OK) {
-		rad_scene_free(sc->scene);
+	/* Sensor nodes (Modbus) come with the scene, from the same bytes at
+	 * every load, so a restart finds them again; a bad declaration
+	 * refuses the scene. */
+	if (sio_load(bytes, len, &sc->scene, &sc->info, &sc->sensors,
+	             &sc->nsensors, err) != RAD_OK) {
 		free(sc);
 		return NULL;
 	}

@@ -127,7 +127,8 @@ static int bench_load(const char *path, rad_scene **sc, bench_result *r)
 		return -1;
 	}
 	double t0 = rad_seconds();
-	rad_status st = sio_load(bytes, r->file_bytes, sc, NULL, &err);
+	rad_status st =
+	        sio_load(bytes, r->file_bytes, sc, NULL, NULL, NULL, &err);
 	r->load_s = rad_seconds() - t0;
 	free(bytes);
 	if (st == RAD_OK) {

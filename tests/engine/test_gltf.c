@@ -1,5 +1,6 @@
 /*
- * test_gltf.c -- glTF import and export (daemon/sceneio/gltf.cc).
+ * test_gltf.c -- glTF import and export (daemon/sceneio: sio_load,
+ * sio_write).
  *
  * Documents are built here, inline: a small JSON template over a buffer
  * that the test encodes as a base64 data: URI, or GLB bytes produced by
@@ -122,7 +123,7 @@ static rad_scene *load_ok(const void *bytes, size_t len, sio_info *info)
 {
 	rad_scene *s = NULL;
 	rad_error err = {0};
-	rad_status st = sio_load(bytes, len, &s, info, &err);
+	rad_status st = sio_load(bytes, len, &s, info, NULL, NULL, &err);
 	if (st != RAD_OK)
 		fail_msg("load failed (%s): %s", rad_status_name(st), err.msg);
 	assert_non_null(s);
@@ -144,7 +145,7 @@ static void expect_fail(const void *bytes, size_t len, rad_status want,
 {
 	rad_scene *s = (rad_scene *)1;
 	rad_error err = {0};
-	rad_status st = sio_load(bytes, len, &s, NULL, &err);
+	rad_status st = sio_load(bytes, len, &s, NULL, NULL, NULL, &err);
 	if (st != want || !strstr(err.msg, part))
 		fail_msg("got %s '%s', want %s with '%s'", rad_status_name(st),
 		         err.msg, rad_status_name(want), part);
@@ -782,7 +783,7 @@ static void try_mutant(const unsigned char *b, size_t n)
 {
 	rad_scene *s = NULL;
 	rad_error err = {0};
-	rad_status st = sio_load(b, n, &s, NULL, &err);
+	rad_status st = sio_load(b, n, &s, NULL, NULL, NULL, &err);
 	if (st == RAD_OK) {
 		assert_non_null(s);
 		rad_scene_free(s);

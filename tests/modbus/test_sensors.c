@@ -1,8 +1,9 @@
 /*
- * test_sensors.c -- sensor nodes from glTF (sio_sensors in
- * daemon/sceneio/gltf.cc): both ways of declaring one, positions and
- * normals through nested transforms (TRS and matrix), the default scene
- * only, and each bad declaration refused with a message naming it.
+ * test_sensors.c -- sensor nodes from glTF (sio_load, sensors.c in
+ * daemon/sceneio): both ways of declaring one, positions and normals
+ * through nested transforms (TRS and matrix), the default scene only,
+ * each bad declaration refused with a message naming it, and the scene
+ * and its sensors read in one pass.
  *
  * The document is written here.  Each bad case is the good document with
  * one string replaced, so it differs from a loading document by exactly
@@ -88,8 +89,9 @@ static void test_sensors_from_nested_nodes(void **state)
 	sio_sensor *s = NULL;
 	size_t n = 99;
 	rad_error err;
-	assert_int_equal(sio_sensors(good_doc, strlen(good_doc), &s, &n, &err),
-	                 RAD_OK);
+	assert_int_equal(
+	        sio_load(good_doc, strlen(good_doc), NULL, NULL, &s, &n, &err),
+	        RAD_OK);
 	assert_int_equal(n, 4); /* desk, probe, both, wall: not the ghost */
 	assert_null(find(s, n, "ghost"));
 	const sio_sensor *desk = find(s, n, "desk");
@@ -125,7 +127,8 @@ static void test_no_sensors(void **state)
 	                          "\"nodes\":[{\"name\":\"sensorless\"}]}";
 	sio_sensor *s = (sio_sensor *)1;
 	size_t n = 7;
-	assert_int_equal(sio_sensors(doc, strlen(doc), &s, &n, NULL), RAD_OK);
+	assert_int_equal(sio_load(doc, strlen(doc), NULL, NULL, &s, &n, NULL),
+	                 RAD_OK);
 	assert_null(s);
 	assert_int_equal(n, 0);
 }
@@ -137,7 +140,7 @@ static void refused(const char *from, const char *to, const char *want)
 	sio_sensor *s = (sio_sensor *)1;
 	size_t n = 7;
 	rad_error err;
-	rad_status st = sio_sensors(doc, strlen(doc), &s, &n, &err);
+	rad_status st = sio_load(doc, strlen(doc), NULL, NULL, &s, &n, &err);
 	if (st != RAD_ERR_INVALID || !strstr(err.msg, want))
 		fail_msg("'%s' -> '%s': status %d, message '%s', expected "
 		         "'%s'",
@@ -175,7 +178,8 @@ static void test_bad_declarations(void **state)
 	                  "234567890123456789012");
 	sio_sensor *s = NULL;
 	size_t n;
-	assert_int_equal(sio_sensors(doc, strlen(doc), &s, &n, NULL), RAD_OK);
+	assert_int_equal(sio_load(doc, strlen(doc), NULL, NULL, &s, &n, NULL),
+	                 RAD_OK);
 	assert_int_equal(strlen(s[0].name), 63);
 	sio_sensors_free(s);
 	free(doc);
@@ -198,7 +202,7 @@ static void test_bad_geometry(void **state)
 	sio_sensor *s = NULL;
 	size_t n;
 	rad_error err;
-	assert_int_equal(sio_sensors(doc2, strlen(doc2), &s, &n, &err),
+	assert_int_equal(sio_load(doc2, strlen(doc2), NULL, NULL, &s, &n, &err),
 	                 RAD_ERR_INVALID);
 	assert_non_null(strstr(err.msg, "sensor 'desk' (node 1): position is "
 	                                "not finite"));
@@ -208,7 +212,7 @@ static void test_bad_geometry(void **state)
 	doc = subst(good_doc, "\"name\":\"Room\",",
 	            "\"name\":\"Room\",\"scale\":[1e300,1e300,1e300],");
 	doc2 = subst(doc, "\"scale\":[1,1,1]", "\"scale\":[1e300,1e300,1e300]");
-	assert_int_equal(sio_sensors(doc2, strlen(doc2), &s, &n, &err),
+	assert_int_equal(sio_load(doc2, strlen(doc2), NULL, NULL, &s, &n, &err),
 	                 RAD_ERR_INVALID);
 	assert_non_null(strstr(err.msg, "sensor 'desk' (node 1): normal (the "
 	                                "node's +Y axis in world space) is "
@@ -218,7 +222,8 @@ static void test_bad_geometry(void **state)
 	/* huge but finite: still a unit normal */
 	doc = subst(good_doc, "\"scale\":[1,1,1]",
 	            "\"scale\":[1e200,1e200,1e200]");
-	assert_int_equal(sio_sensors(doc, strlen(doc), &s, &n, &err), RAD_OK);
+	assert_int_equal(sio_load(doc, strlen(doc), NULL, NULL, &s, &n, &err),
+	                 RAD_OK);
 	near3(find(s, n, "desk")->normal, 0, 1, 0);
 	sio_sensors_free(s);
 	free(doc);
@@ -234,11 +239,85 @@ static void test_bad_documents(void **state)
 	sio_sensor *s = NULL;
 	size_t n;
 	rad_error err;
-	assert_int_equal(sio_sensors("{", 1, &s, &n, &err), RAD_ERR_INVALID);
-	assert_int_equal(sio_sensors(NULL, 0, &s, &n, &err), RAD_ERR_INVALID);
+	assert_int_equal(sio_load("{", 1, NULL, NULL, &s, &n, &err),
+	                 RAD_ERR_INVALID);
+	assert_int_equal(sio_load(NULL, 0, NULL, NULL, &s, &n, &err),
+	                 RAD_ERR_INVALID);
+	assert_int_equal(sio_load(good_doc, strlen(good_doc), NULL, NULL, NULL,
+	                          &n, &err),
+	                 RAD_ERR_INVALID);
+}
+
+/* The good document with a triangle on the lamp's node: a scene too. */
+static char *scene_doc(void)
+{
+	char *with_mesh = subst(good_doc, "{\"name\":\"Lamp\"}",
+	                        "{\"name\":\"Lamp\",\"mesh\":0}");
+	char *doc = subst(
+	        with_mesh, "],\"nodes\":[",
+	        "],\"meshes\":[{\"primitives\":[{\"attributes\":"
+	        "{\"POSITION\":0}}]}],\"accessors\":[{\"bufferView\":0,"
+	        "\"componentType\":5126,\"count\":3,\"type\":\"VEC3\"}],"
+	        "\"bufferViews\":[{\"buffer\":0,\"byteLength\":36}],"
+	        "\"buffers\":[{\"byteLength\":36,\"uri\":\"data:application/"
+	        "octet-stream;base64,"
+	        "AAAAAAAAAAAAAAAAAACAPwAAAAAAAAAAAAAAAAAAAAAA"
+	        "AIC/\"}],\"nodes\":[");
+	free(with_mesh);
+	return doc;
+}
+
+static void test_scene_and_sensors_in_one_pass(void **state)
+{
+	(void)state;
+	char *doc = scene_doc();
+	rad_scene *scene = NULL;
+	sio_info info;
+	sio_sensor *s = NULL;
+	size_t n = 0;
+	rad_error err;
 	assert_int_equal(
-	        sio_sensors(good_doc, strlen(good_doc), NULL, &n, &err),
+	        sio_load(doc, strlen(doc), &scene, &info, &s, &n, &err),
+	        RAD_OK);
+	assert_non_null(scene);
+	rad_scene_counts c;
+	rad_scene_counts_get(scene, &c);
+	assert_int_equal(c.triangles_in, 1);
+	assert_int_equal(info.primitives, 1);
+	assert_int_equal(n, 4);
+	near3(find(s, n, "probe")->position, 11, 2, 4);
+	rad_scene_free(scene);
+	sio_sensors_free(s);
+	free(doc);
+}
+
+/* A scene's own error comes first, even after an earlier sensor error;
+ * a sensor error alone refuses the scene too. */
+static void test_scene_errors_before_sensor_errors(void **state)
+{
+	(void)state;
+	char *doc = scene_doc();
+	char *bad_sensor = subst(doc, "sensor:desk", "sensor:");
+	char *both = subst(bad_sensor, "\"mesh\":0", "\"mesh\":5");
+	rad_scene *scene = (rad_scene *)1;
+	sio_sensor *s = (sio_sensor *)1;
+	size_t n = 7;
+	rad_error err;
+	assert_int_equal(
+	        sio_load(both, strlen(both), &scene, NULL, &s, &n, &err),
 	        RAD_ERR_INVALID);
+	assert_string_equal(err.msg, "node 4 'Lamp': mesh 5 out of range (1 "
+	                             "meshes)");
+	assert_int_equal(sio_load(bad_sensor, strlen(bad_sensor), &scene, NULL,
+	                          &s, &n, &err),
+	                 RAD_ERR_INVALID);
+	assert_string_equal(err.msg, "node 1 'sensor:': empty sensor name");
+	assert_null(scene);
+	assert_null(s);
+	assert_int_equal(n, 0);
+	free(both);
+	free(bad_sensor);
+	free(doc);
 }
 
 int main(void)
@@ -249,6 +328,8 @@ int main(void)
 	        cmocka_unit_test(test_bad_declarations),
 	        cmocka_unit_test(test_bad_geometry),
 	        cmocka_unit_test(test_bad_documents),
+	        cmocka_unit_test(test_scene_and_sensors_in_one_pass),
+	        cmocka_unit_test(test_scene_errors_before_sensor_errors),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -1,0 +1,131 @@
+/*
+ * internal.h -- what the files of the scene library share with each
+ * other; callers use sceneio.h and export.h only.
+ *
+ * An import (load.c) runs in this order: precheck.c looks at the raw
+ * bytes, the shim (gltf_shim.cc) parses them into a sio_doc, walk.c
+ * walks the default scene's nodes with their world transforms, and at
+ * each node import.c adds meshes and lights to the engine scene while
+ * sensors.c collects sensor declarations.  accessor.c resolves the byte
+ * ranges import.c reads.  All of them take the document as hostile.
+ */
+#ifndef LUXRAD_SCENEIO_INTERNAL_H
+#define LUXRAD_SCENEIO_INTERNAL_H
+
+#include <stddef.h>
+#include <stdint.h>
+#include <string.h>
+
+#include "gltf_doc.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* std::max's rule (the first when neither is larger): NaN stays put. */
+static inline double sio_max(double a, double b)
+{
+	return a < b ? b : a;
+}
+
+/* s is the string lit, NULs included. */
+static inline int sio_str_is(sio_str s, const char *lit)
+{
+	return s.len == strlen(lit) && memcmp(s.s, lit, s.len) == 0;
+}
+
+/* load.c: append a warning to info->warnings ("; "-separated, truncated;
+ * info may be NULL). */
+void sio_note(sio_info *info, const char *fmt, ...)
+        __attribute__((format(printf, 2, 3)));
+
+/* precheck.c: refuse what tinygltf must not see; *glb says which parser
+ * the bytes are for. */
+rad_status sio_precheck(const unsigned char *b, size_t len, int *glb,
+                        rad_error *err);
+
+/* ------------------------------------------------------------ walk.c */
+
+typedef struct sio_mat4 {
+	double m[16]; /* column-major like glTF: m[col * 4 + row] */
+} sio_mat4;
+
+/* Determinant of the linear part; its sign tells whether winding flips. */
+double sio_mat_det3(const sio_mat4 *a);
+/* a * p; the bottom row is ignored (glTF matrices are affine). */
+void sio_mat_point(const sio_mat4 *a, const float p[3], double out[3]);
+/* Node ni's name for messages (ni already range-checked). */
+const char *sio_node_name(const sio_doc *d, int ni);
+
+/* Called at each node with its world transform; non-zero ends the walk. */
+typedef rad_status (*sio_visit)(void *ud, int node, const sio_mat4 *world);
+
+/*
+ * Walk the default scene (else scene 0, else every root node) depth
+ * first, roots in scene order, children in order.  Refuses out-of-range
+ * nodes, cycles and shared children, and malformed local transforms.
+ */
+rad_status sio_walk(const sio_doc *d, sio_visit visit, void *ud,
+                    rad_error *err);
+
+/* -------------------------------------------------------- accessor.c */
+
+/* An accessor resolved to bytes; every element lies inside its buffer. */
+typedef struct sio_view {
+	const unsigned char *p; /* first element */
+	size_t stride;          /* bytes between elements */
+	size_t count;           /* elements */
+	size_t size;            /* bytes per element read */
+} sio_view;
+
+/* POSITION accessor ai (VEC3 of FLOAT) of the primitive named where. */
+rad_status sio_position_view(const sio_doc *d, const char *where, int ai,
+                             sio_view *v, rad_error *err);
+/* Index accessor ai (SCALAR of unsigned byte, short or int). */
+rad_status sio_index_view(const sio_doc *d, const char *where, int ai,
+                          sio_view *v, rad_error *err);
+/* Element k of an index view. */
+size_t sio_index_at(const sio_view *v, size_t k);
+
+/* ---------------------------------------------------------- import.c */
+
+/* One import into an engine scene, node by node. */
+typedef struct sio_import {
+	const sio_doc *d;
+	rad_scene *s;
+	sio_info *info;     /* may be NULL */
+	rad_error *err;     /* may be NULL */
+	int64_t *mat_ids;   /* [glTF material + 1]: scene id, or -1 */
+	double *batch;      /* triangles waiting for the builder */
+	size_t nbatch;      /* doubles in batch (9 per triangle) */
+	uint64_t triangles; /* offered so far (the engine counts 32-bit) */
+} sio_import;
+
+rad_status sio_import_init(sio_import *im, const sio_doc *d, rad_scene *s,
+                           sio_info *info, rad_error *err);
+/* A sio_visit: the node's mesh and light, if any, go to the scene. */
+rad_status sio_import_node(void *im, int ni, const sio_mat4 *world);
+void sio_import_done(sio_import *im);
+
+/* --------------------------------------------------------- sensors.c */
+
+/* The sensors found so far, and their names for finding duplicates. */
+typedef struct sio_sensor_set {
+	const sio_doc *d;
+	sio_sensor *v;
+	size_t n, cap;
+	uint32_t *slots; /* open addressing: index + 1 into v, 0 = free */
+	size_t nslots;   /* a power of two, at least 2 n */
+} sio_sensor_set;
+
+/* The sensor node ni declares, if any, placed by its world transform. */
+rad_status sio_sensor_node(sio_sensor_set *ss, int ni, const sio_mat4 *world,
+                           rad_error *err);
+/* Hand the sensors over (*out NULL when none) and empty the set. */
+void sio_sensor_set_take(sio_sensor_set *ss, sio_sensor **out, size_t *n);
+void sio_sensor_set_free(sio_sensor_set *ss);
+
+#ifdef __cplusplus
+}
+#endif
+#endif
