@@ -36,7 +36,7 @@
 #include <math.h>
 #include <string.h>
 
-#include "err.h"
+#include "rad.h"
 #include "scene.h"
 
 #define LARGE_SHARE 1e-3  /* of the total area: polygons that may be cut */

@@ -4,7 +4,7 @@
 #include <stdarg.h>
 #include <stdio.h>
 
-#include "err.h"
+#include "rad.h"
 
 static const char *const status_names[] = {
         [RAD_OK] = "ok",

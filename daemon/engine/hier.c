@@ -13,8 +13,8 @@
 #include <math.h>
 #include <string.h>
 
-#include "err.h"
 #include "ff.h"
+#include "rad.h"
 #include "vis.h"
 
 static v3 poly_centroid(const rad_poly *p)

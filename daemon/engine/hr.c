@@ -16,8 +16,8 @@
 #include <math.h>
 #include <string.h>
 
-#include "err.h"
 #include "hr.h"
+#include "rad.h"
 
 /*
  * Energy bound.  What the receivers gather from surfaces in one step

@@ -13,7 +13,7 @@
  * which the engine links and so does the thin client: it checks and
  * documents the options without the engine's Embree or threads.
  */
-#include "err.h"
+#include "rad.h"
 
 #include <math.h>
 #include <stdio.h>

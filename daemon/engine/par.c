@@ -19,7 +19,7 @@
 #include <stdlib.h>
 #include <unistd.h>
 
-#include "err.h"
+#include "rad.h"
 #include "vis.h"
 
 struct rad_par {

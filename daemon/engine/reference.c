@@ -74,8 +74,8 @@
 #include <xmmintrin.h>
 #endif
 
-#include "err.h"
 #include "par.h"
+#include "rad.h"
 #include "scene.h"
 #include "vis.h"
 

@@ -20,7 +20,7 @@
 #include <math.h>
 #include <string.h>
 
-#include "err.h"
+#include "rad.h"
 #include "rmb.h"
 
 /* ------------------------------------------------- push, update, pull */

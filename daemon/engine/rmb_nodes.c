@@ -8,7 +8,7 @@
 #include <math.h>
 #include <string.h>
 
-#include "err.h"
+#include "rad.h"
 #include "rmb.h"
 
 /* ------------------------------------------------------ reflectance */

@@ -34,7 +34,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "err.h"
+#include "rad.h"
 #include "scene.h"
 #include "vis.h"
 

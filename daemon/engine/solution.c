@@ -27,7 +27,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "err.h"
+#include "rad.h"
 #include "solver.h"
 
 #define SOL_MAGIC 0x534c5852u /* "RXLS" little-endian: "luxrad solution" */

@@ -6,7 +6,6 @@
 #ifndef LUXRAD_SOLVER_H
 #define LUXRAD_SOLVER_H
 
-#include "err.h"
 #include "hier.h"
 #include "par.h"
 #include "rad.h"

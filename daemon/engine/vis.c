@@ -39,7 +39,7 @@
 #include <xmmintrin.h>
 #endif
 
-#include "err.h"
+#include "rad.h"
 #include "vis.h"
 
 struct rad_vis {

@@ -35,7 +35,7 @@
 
 #include <string.h>
 
-#include "err.h"
+#include "rad.h"
 
 /* Items judged per chunk of a worker: few, since an item may trace rays
  * and the cost of items varies a lot. */

@@ -12,7 +12,6 @@
  */
 #include <string.h>
 
-#include "../engine/err.h"
 #include "internal.h"
 
 static const char *type_name(int type)

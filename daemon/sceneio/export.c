@@ -36,8 +36,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "../engine/err.h"
-
 #define WELD_REL 1e-5     /* weld distance, fraction of the scene size */
 #define NORMAL_DOT 0.999  /* cos of the largest angle between welded */
 #define WHITE_PCTILE 0.99 /* automatic white point: this quantile */

@@ -42,7 +42,7 @@
 #include "internal.h"
 
 extern "C" {
-#include "err.h"
+#include "rad.h"
 }
 
 /* gltf_doc.h's codes are tinygltf's. */

@@ -25,7 +25,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "../engine/err.h"
 #include "internal.h"
 
 #define MAX_REFLECTANCE 0.999 /* see the DESIGN note */

@@ -28,7 +28,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "../engine/err.h"
 #include "internal.h"
 
 void sio_note(sio_info *info, const char *fmt, ...)

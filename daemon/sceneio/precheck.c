@@ -13,7 +13,6 @@
  */
 #include <string.h>
 
-#include "../engine/err.h"
 #include "internal.h"
 
 #define GLB_JSON 0x4E4F534Au /* "JSON" read little-endian */

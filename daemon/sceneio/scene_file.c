@@ -9,7 +9,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "../engine/err.h"
 #include "sceneio.h"
 
 rad_status sio_file_read(const char *path, unsigned char **out, size_t *len,

@@ -24,7 +24,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#include "../engine/rad.h"
+#include "rad.h"
 
 #ifdef __cplusplus
 extern "C" {

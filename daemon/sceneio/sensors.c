@@ -16,7 +16,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "../engine/err.h"
 #include "internal.h"
 
 #define SENSOR_PREFIX "sensor:" /* a node name declaring one */

@@ -13,7 +13,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "../engine/err.h"
 #include "internal.h"
 
 static sio_mat4 mat_identity(void)

@@ -17,7 +17,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "../engine/err.h"
 #include "internal.h"
 
 #define KEY_LEN 7 /* base colour, emissive, strength: a material's key */

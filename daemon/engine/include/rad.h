@@ -53,6 +53,18 @@ typedef struct rad_error {
 /* Short constant name of a status ("invalid", "nomem"...). */
 const char *rad_status_name(rad_status st);
 
+/*
+ * Fill err (when not NULL) with code and a printf-style message naming
+ * what was wrong; returns code, so a failure path reads
+ *     return rad_fail(err, RAD_ERR_INVALID, "node %u: ...", id);
+ * The engine reports every failure this way, and so do the libraries
+ * that report through rad_error (the scene library).
+ */
+rad_status rad_fail(rad_error *err, rad_status code, const char *fmt, ...)
+        __attribute__((format(printf, 3, 4)));
+/* Mark err as success (code RAD_OK, empty message). */
+void rad_error_clear(rad_error *err);
+
 /* ------------------------------------------------------ memory accounting */
 
 /*
