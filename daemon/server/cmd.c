@@ -408,6 +408,8 @@ static cmd_result cmd_status(srv_req *r)
 	json_object_set_new(r->res, "commands", commands_json(s));
 	json_object_set_new(r->res, "events_dropped",
 	                    json_integer((json_int_t)s->events_dropped));
+	json_object_set_new(r->res, "slow_consumers",
+	                    json_integer((json_int_t)s->slow_consumers));
 	json_object_set_new(r->res, "modbus", srv_mb_status_json(s));
 	return CMD_REPLY;
 }
