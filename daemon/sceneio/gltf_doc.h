@@ -154,7 +154,7 @@ void sio_doc_free(sio_doc *d);
  * Members of extensions and extras, looked up when the import reaches the
  * node or material (ni, mi in range), with tinygltf's own lookups.
  * *tag says what the member held; the value is set for NUMBER or STRING.
- * RAD_ERR_NOMEM is the only failure.
+ * They fail only if tinygltf throws (out of memory: RAD_ERR_NOMEM).
  */
 /* Node ni's KHR_lights_punctual: ABSENT (no extension), NUMBER ("light"
  * is one) or OTHER. */
