@@ -147,21 +147,14 @@ static const cmd_def commands[] = {
  * (a job's accuracy moves the ones it sets). */
 static void print_option(lx_opt o)
 {
-	char lhs[64], def[64] = "", text[512];
+	char def[64] = "";
 
-	snprintf(lhs, sizeof lhs, "%s--%s", o == LX_OPT_OUTPUT ? "-o, " : "",
-	         lx_opt_table[o].name);
-	if (lx_opt_table[o].meta) {
-		size_t n = strlen(lhs);
-		snprintf(lhs + n, sizeof lhs - n, " %s", lx_opt_table[o].meta);
-	}
 	if (o >= LX_OPT_ENGINE &&
 	    rad_option_defs[o - LX_OPT_ENGINE].type != RAD_OPT_BOOL)
 		rad_option_default_text(&rad_option_defs[o - LX_OPT_ENGINE],
 		                        def, sizeof def);
-	snprintf(text, sizeof text, "%s%s%s%s", lx_opt_table[o].help,
-	         def[0] ? " [" : "", def, def[0] ? "]" : "");
-	rp_help_row(stdout, lhs, text);
+	rp_help_row(stdout, o == LX_OPT_OUTPUT ? 'o' : 0, lx_opt_table[o].name,
+	            lx_opt_table[o].meta, lx_opt_table[o].help, def);
 }
 
 static void print_common(void)

@@ -134,13 +134,9 @@ static void print_help(const cli_args *defaults)
 	       "point.\n\nOptions:\n");
 	for (size_t i = 0; i < NOPTIONS; i++) {
 		const cli_option *o = &cli_options[i];
-		char lhs[40], def[64], text[512];
-		snprintf(lhs, sizeof(lhs), "--%s%s%s", o->name,
-		         o->metavar ? " " : "", o->metavar ? o->metavar : "");
+		char def[64];
 		option_default(o, defaults, def, sizeof(def));
-		snprintf(text, sizeof(text), "%s%s%s%s", o->help,
-		         def[0] ? " [" : "", def, def[0] ? "]" : "");
-		rp_help_row(stdout, lhs, text);
+		rp_help_row(stdout, 0, o->name, o->metavar, o->help, def);
 	}
 	printf("\nWithout --samples, paths are added to each point until its "
 	       "standard\nerror is <= %g of its estimate, at most %llu paths "

@@ -63,17 +63,6 @@ static const tool_option tool_options[] = {
 
 /* ------------------------------------------------------------------ help */
 
-static void print_row(const char *name, const char *metavar, const char *help,
-                      const char *def)
-{
-	char lhs[40], text[512];
-	snprintf(lhs, sizeof(lhs), "--%s%s%s", name, metavar ? " " : "",
-	         metavar ? metavar : "");
-	snprintf(text, sizeof(text), "%s%s%s%s", help, def[0] ? " [" : "", def,
-	         def[0] ? "]" : "");
-	rp_help_row(stdout, lhs, text);
-}
-
 /* An engine option's current value in a, as text. */
 static void engine_value(const rad_option_def *d, const cli_args *a, char *buf,
                          size_t len)
@@ -101,15 +90,16 @@ void cli_print_help(const cli_args *a)
 		         o->kind == T_SOLVER
 		                 ? rad_solver_kind_name(a->opt.solver)
 		                 : "");
-		print_row(o->name, o->metavar, o->help, def);
+		rp_help_row(stdout, 0, o->name, o->metavar, o->help, def);
 	}
 	printf("\nEngine options (the daemon's job options too: "
 	       "protocol/PROTOCOL.md):\n");
 	for (int i = 0; i < RAD_NOPTIONS; i++) {
 		const rad_option_def *d = &rad_option_defs[i];
 		engine_value(d, a, def, sizeof(def));
-		print_row(d->cli, d->type == RAD_OPT_BOOL ? NULL : d->metavar,
-		          d->help, def);
+		rp_help_row(stdout, 0, d->cli,
+		            d->type == RAD_OPT_BOOL ? NULL : d->metavar,
+		            d->help, def);
 	}
 	printf("\nWith neither --iterations nor --tol the solve runs until "
 	       "the\nestimated relative error is <= %g (at most %d "

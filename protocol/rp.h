@@ -285,10 +285,12 @@ int rp_point_line_parse(const char *line, double p[6], const char **why);
  */
 
 /*
- * One row of a command-line tool's option table: lhs ("--eps E") in 22
- * columns, then help wrapped at 79 columns under itself.
+ * One row of a command-line tool's option table: "[-o, ]--name METAVAR"
+ * in 22 columns (shortopt 0: none; metavar NULL: a flag), then the help
+ * and " [def]" (def NULL or "": none) wrapped at 79 columns under itself.
  */
-void rp_help_row(FILE *f, const char *lhs, const char *help);
+void rp_help_row(FILE *f, char shortopt, const char *name, const char *metavar,
+                 const char *help, const char *def);
 
 /*
  * argv as the tools read it: "--name value", "--name=value", flags, "-h",

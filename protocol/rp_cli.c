@@ -11,10 +11,20 @@
 #include <stdlib.h>
 #include <string.h>
 
-void rp_help_row(FILE *f, const char *lhs, const char *help)
+void rp_help_row(FILE *f, char shortopt, const char *name, const char *metavar,
+                 const char *help, const char *def)
 {
 	enum { COL = 25, WIDTH = 79 };
 	int col = COL;
+	char lhs[96], text[1024];
+
+	int n = shortopt ? snprintf(lhs, sizeof(lhs), "-%c, ", shortopt) : 0;
+	snprintf(lhs + n, sizeof(lhs) - (size_t)n, "--%s%s%s", name,
+	         metavar ? " " : "", metavar ? metavar : "");
+	snprintf(text, sizeof(text), "%s%s%s%s", help,
+	         def && def[0] ? " [" : "", def ? def : "",
+	         def && def[0] ? "]" : "");
+	help = text;
 
 	fprintf(f, "  %-22s", lhs);
 	if (strlen(lhs) > 22)
