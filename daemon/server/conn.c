@@ -28,7 +28,6 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/epoll.h>
 #include <sys/socket.h>
 #include <sys/uio.h>
 #include <unistd.h>
@@ -59,10 +58,9 @@ void srv_conn_update_events(srv *s, srv_conn *c)
 	int want_out = c->out_head != NULL;
 	if (reading == c->reading && want_out == c->want_out)
 		return;
-	struct epoll_event ev = {.events = (reading ? EPOLLIN : 0) |
-	                                   (want_out ? EPOLLOUT : 0),
-	                         .data.ptr = &c->w};
-	if (epoll_ctl(s->epfd, EPOLL_CTL_MOD, c->fd, &ev) != 0)
+	if (el_watch_set(s->loop, &c->w,
+	                 (reading ? EL_READABLE : 0u) |
+	                         (want_out ? EL_WRITABLE : 0u)) != 0)
 		srv_warn("connection %llu: epoll_ctl: %s",
 		         (unsigned long long)c->id, strerror(errno));
 	c->reading = reading;
@@ -102,6 +100,20 @@ static void peer_text(int fd, int tcp, char *out, size_t len)
 	snprintf(out, len, "%s:%s", host, port);
 }
 
+static void conn_writable(srv *s, srv_conn *c);
+static void conn_readable(srv *s, srv_conn *c);
+
+static void conn_ready(el_loop *l, el_watch *w, unsigned events)
+{
+	srv *s = w->ud;
+	srv_conn *c = (srv_conn *)((char *)w - offsetof(srv_conn, w));
+	(void)l;
+	if (!c->dead && (events & (EL_WRITABLE | EL_ERROR)))
+		conn_writable(s, c);
+	if (!c->dead && (events & (EL_READABLE | EL_ERROR)))
+		conn_readable(s, c);
+}
+
 void srv_conn_accept(srv *s, int lfd, int tcp, int needs_token)
 {
 	for (;;) {
@@ -124,8 +136,6 @@ void srv_conn_accept(srv *s, int lfd, int tcp, int needs_token)
 			close(fd);
 			continue;
 		}
-		c->w.kind = W_CONN;
-		c->w.ptr = c;
 		c->id = s->next_conn_id++;
 		c->fd = fd;
 		c->listener_tcp = tcp;
@@ -133,8 +143,8 @@ void srv_conn_accept(srv *s, int lfd, int tcp, int needs_token)
 		c->reading = 1;
 		c->last_active = rad_seconds();
 		peer_text(fd, tcp, c->peer, sizeof(c->peer));
-		struct epoll_event ev = {.events = EPOLLIN, .data.ptr = &c->w};
-		if (epoll_ctl(s->epfd, EPOLL_CTL_ADD, fd, &ev) != 0) {
+		if (el_watch_add(s->loop, &c->w, fd, EL_READABLE, conn_ready,
+		                 s) != 0) {
 			close(fd);
 			free(c);
 			continue;
@@ -289,7 +299,7 @@ void srv_conn_send_error(srv *s, srv_conn *c, json_t *id, rp_err code,
 	}
 }
 
-void srv_conn_writable(srv *s, srv_conn *c)
+static void conn_writable(srv *s, srv_conn *c)
 {
 	flush(s, c);
 	/* Output pressure relieved: frames may be waiting. */
@@ -465,7 +475,7 @@ static void drain(srv_conn *c)
 	}
 }
 
-void srv_conn_readable(srv *s, srv_conn *c)
+static void conn_readable(srv *s, srv_conn *c)
 {
 	size_t budget = READ_BUDGET;
 	int eof = 0;
@@ -526,7 +536,7 @@ void srv_conn_readable(srv *s, srv_conn *c)
 
 static void conn_free(srv *s, srv_conn *c)
 {
-	epoll_ctl(s->epfd, EPOLL_CTL_DEL, c->fd, NULL);
+	el_watch_del(s->loop, &c->w);
 	close(c->fd);
 	while (c->out_head) {
 		srv_chunk *k = c->out_head;

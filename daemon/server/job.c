@@ -40,6 +40,7 @@
 #include "server.h"
 
 #define PROGRESS_MIN_S 0.1 /* progress events: at most ~10/s per job */
+#define BUDGET_TICK_S 0.1  /* time budgets checked by the I/O thread */
 
 typedef enum job_action {
 	ACT_STEP = 0,
@@ -109,6 +110,20 @@ void srv_job_register(srv *s, srv_job *j)
 	j->next = NULL;
 	*pp = j;
 	s->njobs++;
+	srv_job_added(s, j);
+}
+
+void srv_job_unregister(srv *s, srv_job *j)
+{
+	for (srv_job **pp = &s->jobs; *pp; pp = &(*pp)->next) {
+		if (*pp == j) {
+			*pp = j->next;
+			break;
+		}
+	}
+	s->njobs--;
+	j->scene->njobs--;
+	srv_job_gone(s, j);
 }
 
 int srv_job_terminal(srv_job_state st)
@@ -214,13 +229,12 @@ static void on_progress(void *ud, double fraction)
 	if (j->quiet || now - j->last_progress < PROGRESS_MIN_S)
 		return;
 	j->last_progress = now;
-	json_t *ev = json_object();
-	json_object_set_new(ev, "event", json_string("progress"));
-	json_object_set_new(ev, "job", json_integer((json_int_t)j->id));
-	json_object_set_new(ev, "iteration", json_integer(j->solver_iter + 1));
-	json_object_set_new(ev, "fraction", srv_jreal(fraction));
-	json_object_set_new(ev, "elapsed_s", json_real(now - j->step_t0));
-	srv_event_post(j->srv, j->id, EV_PROGRESS, ev, 0, 0);
+	srv_event ev = {.kind = EV_PROGRESS,
+	                .job = j->id,
+	                .iteration = j->solver_iter + 1,
+	                .fraction = fraction,
+	                .elapsed_s = now - j->step_t0};
+	srv_event_post(j->srv, &ev);
 }
 
 /* Swap in the solver's state as the job's published result. */
@@ -234,6 +248,7 @@ static void publish(srv *s, srv_job *j, int send_event)
 	rad_solver_stats(j->solver, &st);
 	json_t *stats = ej_stats(&st);
 	char *text = json_dumps(stats, JSON_COMPACT | JSON_REAL_PRECISION(17));
+	json_decref(stats);
 	if (rad_solution_new(j->solver, &rs, &err) == RAD_OK)
 		ns = srv_sol_new(s, rs, j->scene, j->opt.query_tol,
 		                 st.error_estimate);
@@ -262,36 +277,21 @@ static void publish(srv *s, srv_job *j, int send_event)
 	srv_sol_unref(s, old);
 	j->solver_iter = st.iteration;
 	if (send_event) {
-		json_t *ev = json_object();
-		json_object_set_new(ev, "event", json_string("iteration"));
-		json_object_set_new(ev, "job", json_integer((json_int_t)j->id));
-		json_object_set_new(ev, "stats", stats);
-		srv_event_post(s, j->id, EV_ITERATION, ev, 0, st.iteration);
-	} else {
-		json_decref(stats);
+		srv_event ev = {.kind = EV_ITERATION,
+		                .job = j->id,
+		                .iteration = st.iteration,
+		                .stats = st};
+		srv_event_post(s, &ev);
 	}
-}
-
-json_t *srv_state_event_locked(const srv_job *j)
-{
-	SRV_HELD(&j->mu);
-	json_t *ev = json_object();
-	json_object_set_new(ev, "event", json_string("state"));
-	json_object_set_new(ev, "job", json_integer((json_int_t)j->id));
-	json_object_set_new(ev, "state",
-	                    json_string(srv_job_state_name(j->state)));
-	if (j->state == SRV_JOB_FAILED && j->error[0])
-		json_object_set_new(ev, "error", json_string(j->error));
-	return ev;
 }
 
 static void post_state(srv *s, srv_job *j)
 {
+	srv_event ev;
 	pthread_mutex_lock(&j->mu);
-	json_t *ev = srv_state_event_locked(j);
-	uint64_t seq = j->state_seq;
+	srv_state_event_locked(j, &ev);
 	pthread_mutex_unlock(&j->mu);
-	srv_event_post(s, j->id, EV_STATE, ev, seq, 0);
+	srv_event_post(s, &ev);
 }
 
 /* --------------------------------------------------------------- stepping */
@@ -565,6 +565,22 @@ static void run_job(srv *s, srv_job *j)
 
 /* ---------------------------------------------------------------- workers */
 
+/* Timer: raise the cancel flag of jobs past their time budget (the
+ * progress callback does it too, but some phases report no progress). */
+static double budget_tick(el_loop *l, void *ud, double now)
+{
+	srv *s = ud;
+	(void)l;
+	for (srv_job *j = s->jobs; j; j = j->next) {
+		pthread_mutex_lock(&j->mu);
+		if (j->on_worker && j->deadline > 0 && now >= j->deadline &&
+		    !j->replaying)
+			srv_job_raise_cancel_locked(j);
+		pthread_mutex_unlock(&j->mu);
+	}
+	return BUDGET_TICK_S;
+}
+
 static void *worker_main(void *arg)
 {
 	srv *s = arg;
@@ -605,6 +621,10 @@ static void *worker_main(void *arg)
 
 int srv_workers_start(srv *s, int n, char *msg, size_t msglen)
 {
+	if (!el_timer_add(s->loop, BUDGET_TICK_S, budget_tick, s)) {
+		snprintf(msg, msglen, "workers: out of memory");
+		return -1;
+	}
 	s->workers = calloc((size_t)n, sizeof(pthread_t));
 	if (!s->workers) {
 		snprintf(msg, msglen, "workers: out of memory");

@@ -3,7 +3,7 @@
  *
  * Each handler validates its arguments, changes the job under its mutex
  * (never waiting for a worker: a running job is only flagged), tells
- * subscribers of any state change it made, and replies once the change
+ * the core's observers of any state change it made, and replies once the change
  * is recorded in the store (srv_persist_then_reply runs the row write on
  * the store thread).  pause and cancel of a running job reply when the
  * worker has actually stopped (a job waiter, answered from publish.c).
@@ -58,7 +58,6 @@ static void create_done(srv *s, srv_task *t)
 			snprintf(j->name, sizeof(j->name), "job-%llu",
 			         (unsigned long long)j->id);
 		srv_job_register(s, j);
-		srv_mb_job_added(s, j);
 		srv_info("job %llu '%s' created: scene %llu, solver %s, "
 		         "%d threads",
 		         (unsigned long long)j->id, j->name,
@@ -290,7 +289,7 @@ cmd_result srv_cmd_job_run(srv_req *r)
 	j->updated = srv_now_unix();
 	st = j->state;
 	pthread_mutex_unlock(&j->mu);
-	srv_publish_state_now(r->s, j);
+	srv_job_state_changed(r->s, j);
 	return srv_persist_then_reply(r, j, state_reply(r, j, st));
 }
 
@@ -328,7 +327,7 @@ cmd_result srv_cmd_job_pause(srv_req *r)
 		j->updated = srv_now_unix();
 	}
 	pthread_mutex_unlock(&j->mu);
-	srv_publish_state_now(r->s, j);
+	srv_job_state_changed(r->s, j);
 	return srv_persist_then_reply(r, j, state_reply(r, j, SRV_JOB_PAUSED));
 }
 
@@ -355,7 +354,7 @@ cmd_result srv_cmd_job_resume(srv_req *r)
 	}
 	srv_job_enqueue_locked(r->s, j);
 	pthread_mutex_unlock(&j->mu);
-	srv_publish_state_now(r->s, j);
+	srv_job_state_changed(r->s, j);
 	return srv_persist_then_reply(r, j, state_reply(r, j, SRV_JOB_QUEUED));
 }
 
@@ -375,7 +374,7 @@ cmd_result srv_cmd_job_cancel(srv_req *r)
 	j->updated = srv_now_unix();
 	pthread_mutex_unlock(&j->mu);
 	srv_info("job %llu: cancelled", (unsigned long long)j->id);
-	srv_publish_state_now(r->s, j);
+	srv_job_state_changed(r->s, j);
 	return srv_persist_then_reply(r, j,
 	                              state_reply(r, j, SRV_JOB_CANCELLED));
 }
@@ -425,15 +424,7 @@ cmd_result srv_cmd_job_delete(srv_req *r)
 		                    "job %llu is %s: pause or cancel it first",
 		                    (unsigned long long)j->id,
 		                    srv_job_state_name(st));
-	for (srv_job **pp = &s->jobs; *pp; pp = &(*pp)->next) {
-		if (*pp == j) {
-			*pp = j->next;
-			break;
-		}
-	}
-	s->njobs--;
-	j->scene->njobs--;
-	srv_publish_job_gone(s, j);
+	srv_job_unregister(s, j);
 	srv_info("job %llu deleted", (unsigned long long)j->id);
 	return srv_job_store_delete(r, j);
 }

@@ -12,17 +12,11 @@
  * then those added with sensor.add -- their latest value, and the error
  * estimates of the last two iterations (for the progress and the ETA).
  *
- * Hooks (one line each in the daemon's files):
- *   srv_listen            srv_mb_start (exit 2 when it cannot bind)
- *   write_addr_file       "modbus HOST:PORT" line (srv_mb_addr_text)
- *   srv_run's timer       srv_mb_tick: daemon block, once a second
- *   create_done           srv_mb_job_added
- *   srv_recover           srv_mb_sensors_restore, then srv_mb_recovered
- *                         (restored jobs, id order)
- *   srv_publish_event     srv_mb_job_event (state, iteration, progress)
- *   srv_publish_state_now srv_mb_job_event (I/O-thread state changes)
- *   srv_publish_job_gone  srv_mb_job_gone (job.delete)
- *   srv_destroy           srv_mb_stop, after the workers are joined
+ * It is an observer of the core (observe.c), registered by
+ * srv_mb_start: restored jobs (with their sensor.add sensors from the
+ * store, published in id order), created jobs, every job event (the job
+ * is republished; after an iteration its sensors are evaluated) and
+ * deleted jobs.  srv_mb_stop runs after the workers are joined.
  *
  * Sensor values.  After each iteration event the job's latest solution
  * is evaluated at every sensor with rad_solution_query -- the call
@@ -56,6 +50,8 @@
 #include "modbus.h"
 #include "server.h"
 
+#define DAEMON_TICK_S 1.0 /* the daemon block's refresh */
+
 typedef struct mbp_sensor {
 	char name[MB_SENSOR_NAME_MAX];
 	double pt[6]; /* x y z nx ny nz, as query.points takes them */
@@ -75,7 +71,6 @@ typedef struct mbp_job {
 
 struct srv_mbpub {
 	mbp_job *jobs;
-	double next_daemon; /* rad_seconds() of the next daemon block */
 };
 
 /* ------------------------------------------------------------ records */
@@ -451,6 +446,22 @@ static void evaluate(srv *s, srv_job *j, mbp_job *p, size_t from)
 
 /* -------------------------------------------------------------- hooks */
 
+/* The daemon block: memory and uptime. */
+static void publish_daemon(srv *s)
+{
+	srv_summary sum;
+	srv_summarize(s, &sum);
+	mb_publish_daemon(s->mb, &(mb_daemon_vals){s->t0, sum.total});
+}
+
+static double daemon_tick(el_loop *l, void *ud, double now)
+{
+	(void)l;
+	(void)now;
+	publish_daemon(ud);
+	return DAEMON_TICK_S;
+}
+
 static void mb_log(void *ud, int level, const char *msg)
 {
 	(void)ud;
@@ -459,26 +470,6 @@ static void mb_log(void *ud, int level, const char *msg)
 	        : level == 2 ? SRV_LOG_INFO
 	                     : SRV_LOG_DEBUG,
 	        "%s", msg);
-}
-
-int srv_mb_start(srv *s, char *msg, size_t msglen)
-{
-	char why[1024] = "";
-	if (!state(s)) {
-		snprintf(msg, msglen, "modbus: out of memory");
-		return -2;
-	}
-	if (!s->cfg.modbus.listen[0]) {
-		srv_info("modbus: off (modbus_listen = none)");
-		return 0;
-	}
-	s->mb = mb_server_start(&s->cfg.modbus, mb_log, NULL, why, sizeof(why));
-	if (!s->mb) {
-		snprintf(msg, msglen, "%s", why);
-		return -2;
-	}
-	srv_mb_tick(s, rad_seconds());
-	return 0;
 }
 
 void srv_mb_stop(srv *s)
@@ -511,19 +502,9 @@ int srv_mb_addr_text(srv *s, char *buf, size_t len)
 	return 1;
 }
 
-void srv_mb_tick(srv *s, double now)
+static void on_job_added(void *ud, srv_job *j)
 {
-	struct srv_mbpub *m = s->mbpub;
-	if (!s->mb || !m || now < m->next_daemon)
-		return;
-	m->next_daemon = now + 1.0;
-	srv_summary sum;
-	srv_summarize(s, &sum);
-	mb_publish_daemon(s->mb, &(mb_daemon_vals){s->t0, sum.total});
-}
-
-void srv_mb_job_added(srv *s, srv_job *j)
-{
+	srv *s = ud;
 	mbp_job *p = job_record(s, j);
 	publish_job(s, j);
 	for (size_t i = 0; p && i < p->n; i++)
@@ -538,37 +519,48 @@ static int cmp_job_id(const void *a, const void *b)
 	return x < y ? -1 : x > y;
 }
 
-void srv_mb_recovered(srv *s)
+static void restore_sensor(void *ud, uint64_t job, const char *name,
+                           const double pt[6]);
+
+/* Observer: the registries are restored; the sensors added to jobs come
+ * back from the store, then every job is published, in id order. */
+static int on_recovered(void *ud, char *msg, size_t msglen)
 {
+	srv *s = ud;
 	size_t n = 0, k = 0;
+	if (srv_store_sensor_list(s->store, restore_sensor, s, msg, msglen) !=
+	    0)
+		return -1;
 	for (srv_job *j = s->jobs; j; j = j->next)
 		n++;
 	srv_job **v = n ? malloc(n * sizeof(*v)) : NULL;
 	if (n && !v) {
 		srv_warn("modbus: out of memory publishing restored jobs");
-		return;
+		return 0;
 	}
 	for (srv_job *j = s->jobs; j; j = j->next)
 		v[k++] = j;
 	if (n > 1) /* qsort's array must not be NULL, even for n = 0 */
 		qsort(v, n, sizeof(*v), cmp_job_id);
 	for (size_t i = 0; i < n; i++)
-		srv_mb_job_added(s, v[i]);
+		on_job_added(s, v[i]);
 	free(v);
-	if (s->mbpub)
-		s->mbpub->next_daemon = 0;
-	srv_mb_tick(s, rad_seconds());
+	if (s->mb)
+		publish_daemon(s);
+	return 0;
 }
 
-void srv_mb_job_event(srv *s, srv_job *j, ev_kind ev)
+static void on_job_event(void *ud, srv_job *j, const srv_event *ev)
 {
+	srv *s = ud;
 	publish_job(s, j);
-	if (ev == EV_ITERATION)
+	if (ev->kind == EV_ITERATION)
 		evaluate(s, j, find_job(s, j->id), 0);
 }
 
-void srv_mb_job_gone(srv *s, srv_job *j)
+static void on_job_gone(void *ud, srv_job *j)
 {
+	srv *s = ud;
 	struct srv_mbpub *m = s->mbpub;
 	mb_job_remove(s->mb, j->id);
 	for (mbp_job **pp = m ? &m->jobs : NULL; pp && *pp; pp = &(*pp)->next) {
@@ -579,6 +571,34 @@ void srv_mb_job_gone(srv *s, srv_job *j)
 			break;
 		}
 	}
+}
+
+int srv_mb_start(srv *s, char *msg, size_t msglen)
+{
+	static const srv_observer ops = {.recovered = on_recovered,
+	                                 .job_added = on_job_added,
+	                                 .job_event = on_job_event,
+	                                 .job_gone = on_job_gone};
+	char why[1024] = "";
+	if (!state(s) || srv_observe(s, &ops, s) != 0) {
+		snprintf(msg, msglen, "modbus: out of memory");
+		return -2;
+	}
+	if (!s->cfg.modbus.listen[0]) {
+		srv_info("modbus: off (modbus_listen = none)");
+		return 0;
+	}
+	s->mb = mb_server_start(&s->cfg.modbus, mb_log, NULL, why, sizeof(why));
+	if (!s->mb) {
+		snprintf(msg, msglen, "%s", why);
+		return -2;
+	}
+	publish_daemon(s);
+	if (!el_timer_add(s->loop, DAEMON_TICK_S, daemon_tick, s)) {
+		snprintf(msg, msglen, "modbus: out of memory");
+		return -2;
+	}
+	return 0;
 }
 
 json_t *srv_mb_status_json(srv *s)
@@ -744,11 +764,6 @@ static void restore_sensor(void *ud, uint64_t job, const char *name,
 	if (!add_sensor(p, name, pt, 1))
 		srv_warn("job %llu: out of memory for sensor '%s'",
 		         (unsigned long long)job, name);
-}
-
-int srv_mb_sensors_restore(srv *s, char *msg, size_t msglen)
-{
-	return srv_store_sensor_list(s->store, restore_sensor, s, msg, msglen);
 }
 
 cmd_result srv_cmd_sensor_add(srv_req *r)

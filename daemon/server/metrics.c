@@ -15,7 +15,6 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/epoll.h>
 #include <sys/socket.h>
 #include <unistd.h>
 
@@ -25,9 +24,10 @@
 #define HTTP_MAX_REQUEST 8192
 #define HTTP_TIMEOUT_S 5.0
 #define HTTP_MAX_CONNS 16
+#define HTTP_TICK_S 0.1 /* deadlines; closes of answered requests */
 
 typedef struct srv_http {
-	srv_watch w;
+	el_watch w; /* ud: the srv */
 	int fd;
 	char req[HTTP_MAX_REQUEST];
 	size_t len;
@@ -175,12 +175,17 @@ static void respond(srv *s, srv_http *h)
 	}
 	h->out = out.b;
 	h->out_len = out.n;
-	struct epoll_event ev = {.events = EPOLLOUT, .data.ptr = &h->w};
-	epoll_ctl(s->epfd, EPOLL_CTL_MOD, h->fd, &ev);
+	el_watch_set(s->loop, &h->w, EL_WRITABLE);
 }
+
+static void http_ready(el_loop *l, el_watch *w, unsigned events);
+static double http_tick(el_loop *l, void *ud, double now);
 
 void srv_metrics_accept(srv *s, int lfd)
 {
+	if (!s->http_timer)
+		s->http_timer =
+		        el_timer_add(s->loop, HTTP_TICK_S, http_tick, s);
 	for (;;) {
 		int fd = accept4(lfd, NULL, NULL, SOCK_NONBLOCK | SOCK_CLOEXEC);
 		if (fd < 0)
@@ -191,12 +196,10 @@ void srv_metrics_accept(srv *s, int lfd)
 			close(fd);
 			continue;
 		}
-		h->w.kind = W_HTTP;
-		h->w.ptr = h;
 		h->fd = fd;
 		h->deadline = rad_seconds() + HTTP_TIMEOUT_S;
-		struct epoll_event ev = {.events = EPOLLIN, .data.ptr = &h->w};
-		if (epoll_ctl(s->epfd, EPOLL_CTL_ADD, fd, &ev) != 0) {
+		if (el_watch_add(s->loop, &h->w, fd, EL_READABLE, http_ready,
+		                 s) != 0) {
 			close(fd);
 			free(h);
 			continue;
@@ -245,7 +248,7 @@ static void http_reap(srv *s)
 		srv_http *h = *pp;
 		if (h->dead) {
 			*pp = h->next;
-			epoll_ctl(s->epfd, EPOLL_CTL_DEL, h->fd, NULL);
+			el_watch_del(s->loop, &h->w);
 			close(h->fd);
 			free(h->out);
 			free(h);
@@ -256,12 +259,14 @@ static void http_reap(srv *s)
 	}
 }
 
-void srv_http_event(srv *s, void *ptr, uint32_t events)
+static void http_ready(el_loop *l, el_watch *w, unsigned events)
 {
-	srv_http *h = ptr;
+	srv *s = w->ud;
+	srv_http *h = (srv_http *)((char *)w - offsetof(srv_http, w));
+	(void)l;
 	if (h->dead)
 		return;
-	if (events & (EPOLLERR | EPOLLHUP) && !(events & EPOLLIN))
+	if (events & EL_ERROR && !(events & EL_READABLE))
 		h->dead = 1;
 	else if (h->out)
 		http_write(h);
@@ -269,14 +274,20 @@ void srv_http_event(srv *s, void *ptr, uint32_t events)
 		http_read(s, h);
 	if (h->out && !h->dead && h->off == 0)
 		http_write(h);
+	if (h->dead) /* HTTP/1.0: the close ends the response */
+		http_reap(s);
 }
 
-void srv_metrics_tick(srv *s, double now)
+/* Timer: requests past their deadline; connections done with. */
+static double http_tick(el_loop *l, void *ud, double now)
 {
+	srv *s = ud;
+	(void)l;
 	for (srv_http *h = s->https; h; h = h->next)
 		if (now >= h->deadline)
 			h->dead = 1;
 	http_reap(s);
+	return HTTP_TICK_S;
 }
 
 void srv_metrics_free_all(srv *s)

@@ -10,16 +10,13 @@
  * and executes on the I/O thread, where it sends the reply and frees the
  * task.
  *
- * The inbox is a mutex-protected list plus an eventfd: any thread posts a
- * message and writes the eventfd; the I/O thread, woken by epoll, takes
+ * The inbox is a mutex-protected list plus the event loop's wake-up: any
+ * thread posts a message and rings it; the I/O thread, woken, takes
  * the whole list in one swap and handles it with no lock held.
  */
-#include <errno.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/eventfd.h>
-#include <unistd.h>
 
 #include "check.h"
 #include "log.h"
@@ -115,7 +112,6 @@ void srv_pool_stop(srv_pool *p)
 
 void srv_inbox_post(srv *s, srv_msg *m)
 {
-	uint64_t one = 1;
 	m->next = NULL;
 	pthread_mutex_lock(&s->inbox_mu);
 	if (s->inbox_tail)
@@ -124,10 +120,7 @@ void srv_inbox_post(srv *s, srv_msg *m)
 		s->inbox_head = m;
 	s->inbox_tail = m;
 	pthread_mutex_unlock(&s->inbox_mu);
-	/* An eventfd counter cannot overflow at our rates; EAGAIN would
-	 * only mean it is already readable. */
-	if (write(s->wakefd, &one, sizeof(one)) < 0 && errno != EAGAIN)
-		srv_warn("wake-up write failed: %s", strerror(errno));
+	el_wake(s->loop);
 }
 
 void srv_task_finish(srv *s, srv_task *t)
@@ -144,31 +137,22 @@ void srv_task_finish(srv *s, srv_task *t)
 	srv_inbox_post(s, m);
 }
 
-void srv_event_post(srv *s, uint64_t job, ev_kind ev, json_t *hdr, uint64_t seq,
-                    uint32_t iter)
+void srv_event_post(srv *s, const srv_event *ev)
 {
-	srv_msg *m = calloc(1, sizeof(*m));
-	if (!m || rp_frame_encode(hdr, NULL, 0, &m->data, &m->len) != 0) {
-		srv_warn("job %llu: out of memory encoding an event",
-		         (unsigned long long)job);
-		free(m);
-		json_decref(hdr);
+	srv_msg *m = malloc(sizeof(*m));
+	if (!m) {
+		srv_warn("job %llu: out of memory posting an event",
+		         (unsigned long long)ev->job);
 		return;
 	}
-	json_decref(hdr);
 	m->kind = MSG_EVENT;
-	m->job = job;
-	m->ev = ev;
-	m->seq = seq;
-	m->iter = iter;
+	m->task = NULL;
+	m->ev = *ev;
 	srv_inbox_post(s, m);
 }
 
 void srv_inbox_drain(srv *s)
 {
-	uint64_t v;
-	if (read(s->wakefd, &v, sizeof(v)) < 0 && errno != EAGAIN)
-		srv_warn("wake-up read failed: %s", strerror(errno));
 	pthread_mutex_lock(&s->inbox_mu);
 	srv_msg *m = s->inbox_head;
 	s->inbox_head = s->inbox_tail = NULL;
@@ -179,9 +163,8 @@ void srv_inbox_drain(srv *s)
 			if (m->task->done)
 				m->task->done(s, m->task);
 		} else {
-			srv_publish_event(s, m);
+			srv_event_dispatch(s, &m->ev);
 		}
-		free(m->data);
 		free(m);
 		m = next;
 	}

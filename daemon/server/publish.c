@@ -3,9 +3,9 @@
  * fan-out of events posted by workers, the drop policy, and the replies
  * owed to job.pause / job.cancel once a worker has stopped.
  *
- * Runs on the I/O thread only.  Workers encode an event once and post it
- * to the inbox; here it is copied into the output queue of every
- * connection subscribed to the job, under the drop policy (server.c,
+ * Runs on the I/O thread only, as an observer of the core (observe.c):
+ * each job event is encoded here once and copied into the output queue
+ * of every connection subscribed to the job, under the drop policy (server.c,
  * DESIGN): a progress event that would take a queue past
  * max_output_bytes is dropped and counted on the subscription; an
  * iteration or state event that does not fit closes the connection with
@@ -13,16 +13,17 @@
  * "dropped_progress": n.
  *
  * Ordering: state events carry the job's state_seq.  The I/O thread
- * publishes its own state changes at once; a worker's change still in
- * the inbox when the I/O thread has published a later one is stale and
- * skipped.  A subscription remembers the state_seq and iteration that its
- * subscribe reply reported, and gets only events after those, so a
- * client neither misses nor repeats a transition.
+ * reports its own state changes at once; a worker's change still in
+ * the inbox when the I/O thread has reported a later one is stale
+ * (not fresh) and skipped.  A subscription remembers the state_seq and
+ * iteration that its subscribe reply reported, and gets only events after
+ * those, so a client neither misses nor repeats a transition.
  */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
+#include "engine_json.h"
 #include "log.h"
 #include "server.h"
 
@@ -110,42 +111,55 @@ static void fan_out(srv *s, uint64_t job, ev_kind ev, const unsigned char *data,
 	}
 }
 
-void srv_publish_event(srv *s, srv_msg *m)
+/* The event's frame: the protocol's event header, encoded once. */
+static int encode(const srv_event *ev, unsigned char **data, size_t *len)
 {
-	srv_job *j = srv_job_find(s, m->job);
-	if (!j)
-		return; /* deleted meanwhile */
-	srv_mb_job_event(s, j, m->ev);
-	if (m->ev == EV_STATE) {
-		if (m->seq > j->pub_seq) {
-			j->pub_seq = m->seq;
-			fan_out(s, m->job, EV_STATE, m->data, m->len, m->seq,
-			        0);
-		}
-		srv_job_complete_waiters(s, j);
-		return;
+	static const char *const names[] = {"progress", "iteration", "state"};
+	json_t *h = json_object();
+	json_object_set_new(h, "event", json_string(names[ev->kind]));
+	json_object_set_new(h, "job", json_integer((json_int_t)ev->job));
+	switch (ev->kind) {
+	case EV_PROGRESS:
+		json_object_set_new(h, "iteration",
+		                    json_integer(ev->iteration));
+		json_object_set_new(h, "fraction", srv_jreal(ev->fraction));
+		json_object_set_new(h, "elapsed_s", json_real(ev->elapsed_s));
+		break;
+	case EV_ITERATION:
+		json_object_set_new(h, "stats", ej_stats(&ev->stats));
+		break;
+	case EV_STATE:
+		json_object_set_new(h, "state",
+		                    json_string(srv_job_state_name(ev->state)));
+		if (ev->state == SRV_JOB_FAILED && ev->error[0])
+			json_object_set_new(h, "error", json_string(ev->error));
+		break;
 	}
-	fan_out(s, m->job, m->ev, m->data, m->len, 0, m->iter);
+	int rc = rp_frame_encode(h, NULL, 0, data, len);
+	json_decref(h);
+	return rc;
 }
 
-void srv_publish_state_now(srv *s, srv_job *j)
+static void complete_waiters(srv *s, srv_job *j);
+
+/* Observer: a job event reached the I/O thread. */
+static void on_job_event(void *ud, srv_job *j, const srv_event *ev)
 {
+	srv *s = ud;
 	unsigned char *data;
 	size_t len;
 
-	srv_mb_job_event(s, j, EV_STATE);
-	pthread_mutex_lock(&j->mu);
-	uint64_t seq = j->state_seq;
-	json_t *ev = seq > j->pub_seq ? srv_state_event_locked(j) : NULL;
-	pthread_mutex_unlock(&j->mu);
-	if (!ev)
-		return;
-	if (rp_frame_encode(ev, NULL, 0, &data, &len) == 0) {
-		j->pub_seq = seq;
-		fan_out(s, j->id, EV_STATE, data, len, seq, 0);
+	if ((ev->kind != EV_STATE || ev->fresh) &&
+	    encode(ev, &data, &len) == 0) {
+		fan_out(s, ev->job, ev->kind, data, len, ev->seq,
+		        ev->kind == EV_ITERATION ? ev->iteration : 0);
 		free(data);
+	} else if (ev->kind != EV_STATE || ev->fresh) {
+		srv_warn("job %llu: out of memory encoding an event",
+		         (unsigned long long)ev->job);
 	}
-	json_decref(ev);
+	if (ev->kind == EV_STATE)
+		complete_waiters(s, j);
 }
 
 /* ----------------------------------------------------------------- waiters */
@@ -162,7 +176,7 @@ int srv_job_add_waiter(srv_job *j, uint64_t conn_id, json_t *id)
 	return 0;
 }
 
-void srv_job_complete_waiters(srv *s, srv_job *j)
+static void complete_waiters(srv *s, srv_job *j)
 {
 	pthread_mutex_lock(&j->mu);
 	job_waiter *w = NULL;
@@ -186,9 +200,10 @@ void srv_job_complete_waiters(srv *s, srv_job *j)
 	}
 }
 
-void srv_publish_job_gone(srv *s, srv_job *j)
+/* Observer: a job was deleted; its subscriptions end, owed replies go. */
+static void on_job_gone(void *ud, srv_job *j)
 {
-	srv_mb_job_gone(s, j);
+	srv *s = ud;
 	for (srv_conn *c = s->conns; c; c = c->next) {
 		srv_sub *sub = find_sub(c, j->id);
 		if (sub) {
@@ -196,7 +211,14 @@ void srv_publish_job_gone(srv *s, srv_job *j)
 			c->nsubs--;
 		}
 	}
-	srv_job_complete_waiters(s, j);
+	complete_waiters(s, j);
+}
+
+int srv_subs_start(srv *s)
+{
+	static const srv_observer ops = {.job_event = on_job_event,
+	                                 .job_gone = on_job_gone};
+	return srv_observe(s, &ops, s);
 }
 
 /* ------------------------------------------------------------- commands */

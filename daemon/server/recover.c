@@ -266,9 +266,7 @@ int srv_recover(srv *s, char *msg, size_t msglen)
 	for (size_t i = 0; rc == 0 && i < l.njobs; i++)
 		recover_job(s, &l.jobs[i]);
 	if (rc == 0)
-		rc = srv_mb_sensors_restore(s, msg, msglen);
-	if (rc == 0)
-		srv_mb_recovered(s);
+		rc = srv_observers_recovered(s, msg, msglen);
 	for (size_t i = 0; i < l.njobs; i++)
 		srv_job_row_clear(&l.jobs[i]);
 	free(l.scenes);

@@ -20,7 +20,7 @@
  *   - the store pool (one thread, so row writes keep their order) parses
  *     and stores uploads and writes job rows for control commands.
  * Other threads reach the I/O thread only through the inbox (a list
- * under inbox_mu plus an eventfd that epoll watches).
+ * under inbox_mu plus the event loop's wake-up).
  *
  * Locks, and what each guards.
  *   store_mu    every srv_store call (SQLite is used from one thread at a
@@ -84,7 +84,14 @@
  * running job's cancel flag; workers record their job as queued and
  * checkpoint it; then the pools finish their tasks, every connection
  * gets shutting_down, output is flushed (bounded), and the process
- * exits 0.  Signal handling is a signalfd in the loop: no handlers.
+ * exits 0.  Signals are delivered by the event loop (loop.h): no
+ * handlers.
+ *
+ * Timers.  The event loop (loop/) sleeps until the nearest timer; each
+ * periodic duty is a timer its owner registers: time budgets (job.c),
+ * metrics requests (metrics.c), the Modbus daemon block (mbpub.c).
+ * Connections are reaped and their idle and flush limits checked at the
+ * end of every turn (after_turn).
  */
 #include <arpa/inet.h>
 #include <errno.h>
@@ -96,10 +103,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/epoll.h>
-#include <sys/eventfd.h>
 #include <sys/file.h>
-#include <sys/signalfd.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
 #include <sys/un.h>
@@ -109,7 +113,6 @@
 #include "log.h"
 #include "server.h"
 
-#define TICK_MS 100          /* timers: idle, budgets, shutdown */
 #define SHUTDOWN_FLUSH_S 2.0 /* time given to flush the last bytes */
 
 double srv_now_unix(void)
@@ -218,10 +221,18 @@ static void bound_text(int fd, char *out, size_t len)
 		snprintf(out, len, "%s:%s", host, port);
 }
 
-static int add_watch(srv *s, int fd, srv_watch *w, uint32_t events)
+static void listener_ready(el_loop *l, el_watch *w, unsigned events)
 {
-	struct epoll_event ev = {.events = events, .data.ptr = w};
-	return epoll_ctl(s->epfd, EPOLL_CTL_ADD, fd, &ev);
+	srv *s = w->ud;
+	srv_listener *lis =
+	        (srv_listener *)((char *)w - offsetof(srv_listener, w));
+	(void)l;
+	(void)events;
+	if (lis->kind == 2)
+		srv_metrics_accept(s, lis->fd);
+	else
+		srv_conn_accept(s, lis->fd, lis->kind == 0,
+		                srv_token_needed(s, lis->needs_token));
 }
 
 static int listen_tcp(srv *s, const char *spec, int kind, char *msg,
@@ -268,10 +279,8 @@ static int listen_tcp(srv *s, const char *spec, int kind, char *msg,
 	bound_text(fd, hp, sizeof(hp));
 	snprintf(l->text, sizeof(l->text), "%s %s",
 	         kind == 2 ? "metrics" : "tcp", hp);
-	l->w.kind = W_LISTEN;
-	l->w.ptr = l;
 	s->nlis++;
-	return add_watch(s, fd, &l->w, EPOLLIN);
+	return el_watch_add(s->loop, &l->w, fd, EL_READABLE, listener_ready, s);
 }
 
 static int listen_unix(srv *s, const char *path, char *msg, size_t msglen)
@@ -313,10 +322,8 @@ static int listen_unix(srv *s, const char *path, char *msg, size_t msglen)
 	l->fd = fd;
 	l->kind = 1;
 	snprintf(l->text, sizeof(l->text), "unix %s", path);
-	l->w.kind = W_LISTEN;
-	l->w.ptr = l;
 	s->nlis++;
-	return add_watch(s, fd, &l->w, EPOLLIN);
+	return el_watch_add(s->loop, &l->w, fd, EL_READABLE, listener_ready, s);
 }
 
 /* <data_dir>/luxradd.addr, written atomically (tmp, fsync, rename). */
@@ -377,7 +384,12 @@ int srv_listen(srv *s, char *msg, size_t msglen)
 			         "loopback and has no authentication",
 			         s->lis[i].text + 8);
 	}
-	return srv_mb_start(s, msg, msglen);
+	int rc = srv_mb_start(s, msg, msglen);
+	if (rc == 0 && srv_subs_start(s) != 0) {
+		snprintf(msg, msglen, "subscriptions: too many observers");
+		rc = -1;
+	}
+	return rc;
 }
 
 /* Log the listeners and publish them in luxradd.addr. */
@@ -393,7 +405,7 @@ static void close_listeners(srv *s)
 	for (int i = 0; i < s->nlis; i++) {
 		if (s->lis[i].fd < 0)
 			continue;
-		epoll_ctl(s->epfd, EPOLL_CTL_DEL, s->lis[i].fd, NULL);
+		el_watch_del(s->loop, &s->lis[i].w);
 		close(s->lis[i].fd);
 		s->lis[i].fd = -1;
 		if (s->lis[i].kind == 1)
@@ -401,102 +413,6 @@ static void close_listeners(srv *s)
 	}
 	if (s->addr_path[0])
 		unlink(s->addr_path);
-}
-
-/* ------------------------------------------------------------------- init */
-
-static void config_line(void *ud, const char *text)
-{
-	(void)ud;
-	srv_debug("config: %s", text);
-}
-
-int srv_init(srv *s, const srv_config *cfg, int argc, char **argv, char *msg,
-             size_t msglen)
-{
-	sigset_t set;
-
-	memset(s, 0, sizeof(*s));
-	s->cfg = *cfg;
-	s->argc = argc;
-	s->argv = argv;
-	s->t0 = rad_seconds();
-	s->epfd = s->sigfd = s->wakefd = s->lock_fd = -1;
-	s->next_conn_id = 1;
-	pthread_mutex_init(&s->store_mu, NULL);
-	pthread_mutex_init(&s->inbox_mu, NULL);
-	pthread_mutex_init(&s->runq_mu, NULL);
-	pthread_cond_init(&s->runq_cv, NULL);
-	atomic_store(&s->ckpt_interval_ms,
-	             (long long)(cfg->checkpoint_interval_s * 1000.0));
-	srv_config_dump(cfg, config_line, NULL);
-
-	long cores = sysconf(_SC_NPROCESSORS_ONLN);
-	int w = cfg->workers > 0 ? cfg->workers : 1;
-	s->accuracy = cfg->accuracy;
-	s->solver_threads = cfg->solver_threads > 0
-	                            ? cfg->solver_threads
-	                            : (int)(cores > w ? cores / w : 1);
-	if (srv_load_token(s, cfg, msg, msglen) != 0)
-		return -2;
-	if (cfg->require_token && !s->token) {
-		snprintf(msg, msglen,
-		         "require_token is set but no token_file "
-		         "is configured");
-		return -2;
-	}
-
-	/* Signals go to the signalfd; threads started later inherit the
-	 * mask, so none of them ever runs a handler. */
-	sigemptyset(&set);
-	sigaddset(&set, SIGTERM);
-	sigaddset(&set, SIGINT);
-	sigaddset(&set, SIGHUP);
-	pthread_sigmask(SIG_BLOCK, &set, NULL);
-	signal(SIGPIPE, SIG_IGN);
-	s->sigfd = signalfd(-1, &set, SFD_NONBLOCK | SFD_CLOEXEC);
-	s->epfd = epoll_create1(EPOLL_CLOEXEC);
-	s->wakefd = eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);
-	if (s->sigfd < 0 || s->epfd < 0 || s->wakefd < 0) {
-		snprintf(msg, msglen, "cannot set up the event loop: %s",
-		         strerror(errno));
-		return -1;
-	}
-	s->sig_w.kind = W_SIGNAL;
-	s->wake_w.kind = W_WAKE;
-	add_watch(s, s->sigfd, &s->sig_w, EPOLLIN);
-	add_watch(s, s->wakefd, &s->wake_w, EPOLLIN);
-
-	s->store = srv_store_open(cfg->data_dir, msg, msglen);
-	if (!s->store)
-		return -1;
-	if (srv_store_repairs(s->store)[0])
-		srv_warn("store %s: %s", cfg->data_dir,
-		         srv_store_repairs(s->store));
-	/* One daemon per data directory. */
-	snprintf(s->lock_path, sizeof(s->lock_path), "%s/luxradd.lock",
-	         cfg->data_dir);
-	s->lock_fd = open(s->lock_path, O_RDWR | O_CREAT | O_CLOEXEC, 0600);
-	if (s->lock_fd < 0 || flock(s->lock_fd, LOCK_EX | LOCK_NB) != 0) {
-		snprintf(msg, msglen, "%s: %s", s->lock_path,
-		         errno == EWOULDBLOCK
-		                 ? "another luxradd uses this data directory"
-		                 : strerror(errno));
-		return -1;
-	}
-	snprintf(s->addr_path, sizeof(s->addr_path), "%s/luxradd.addr",
-	         cfg->data_dir);
-	return 0;
-}
-
-int srv_start_threads(srv *s, char *msg, size_t msglen)
-{
-	int q = s->cfg.query_threads > 0 ? s->cfg.query_threads : 1;
-	if (srv_pool_start(s, &s->store_pool, "store", 1, msg, msglen) != 0 ||
-	    srv_pool_start(s, &s->query_pool, "query", q, msg, msglen) != 0)
-		return -1;
-	return srv_workers_start(s, s->cfg.workers > 0 ? s->cfg.workers : 1,
-	                         msg, msglen);
 }
 
 /* ---------------------------------------------------------------- signals */
@@ -548,17 +464,104 @@ static void reload_config(srv *s)
 	         s->token ? "set" : "none");
 }
 
-static void handle_signals(srv *s)
+static void on_signal(el_loop *l, int signo, void *ud)
 {
-	struct signalfd_siginfo si;
-	while (read(s->sigfd, &si, sizeof(si)) == (ssize_t)sizeof(si)) {
-		if (si.ssi_signo == SIGHUP)
-			reload_config(s);
-		else
-			srv_begin_shutdown(s, si.ssi_signo == SIGINT
-			                              ? "SIGINT"
-			                              : "SIGTERM");
+	srv *s = ud;
+	(void)l;
+	if (signo == SIGHUP)
+		reload_config(s);
+	else
+		srv_begin_shutdown(s, signo == SIGINT ? "SIGINT" : "SIGTERM");
+}
+
+/* ------------------------------------------------------------------- init */
+
+static void config_line(void *ud, const char *text)
+{
+	(void)ud;
+	srv_debug("config: %s", text);
+}
+
+static void inbox_wake(el_loop *l, void *ud)
+{
+	(void)l;
+	srv_inbox_drain(ud);
+}
+
+int srv_init(srv *s, const srv_config *cfg, int argc, char **argv, char *msg,
+             size_t msglen)
+{
+	static const int sigs[] = {SIGTERM, SIGINT, SIGHUP};
+
+	memset(s, 0, sizeof(*s));
+	s->cfg = *cfg;
+	s->argc = argc;
+	s->argv = argv;
+	s->t0 = rad_seconds();
+	s->lock_fd = -1;
+	s->next_conn_id = 1;
+	pthread_mutex_init(&s->store_mu, NULL);
+	pthread_mutex_init(&s->inbox_mu, NULL);
+	pthread_mutex_init(&s->runq_mu, NULL);
+	pthread_cond_init(&s->runq_cv, NULL);
+	atomic_store(&s->ckpt_interval_ms,
+	             (long long)(cfg->checkpoint_interval_s * 1000.0));
+	srv_config_dump(cfg, config_line, NULL);
+
+	long cores = sysconf(_SC_NPROCESSORS_ONLN);
+	int w = cfg->workers > 0 ? cfg->workers : 1;
+	s->accuracy = cfg->accuracy;
+	s->solver_threads = cfg->solver_threads > 0
+	                            ? cfg->solver_threads
+	                            : (int)(cores > w ? cores / w : 1);
+	if (srv_load_token(s, cfg, msg, msglen) != 0)
+		return -2;
+	if (cfg->require_token && !s->token) {
+		snprintf(msg, msglen,
+		         "require_token is set but no token_file "
+		         "is configured");
+		return -2;
 	}
+
+	/* Signals come through the loop, before any thread is started:
+	 * they inherit the mask, so none of them ever runs a handler. */
+	signal(SIGPIPE, SIG_IGN);
+	s->loop = el_new(msg, msglen);
+	if (!s->loop ||
+	    el_signals(s->loop, sigs, 3, on_signal, s, msg, msglen) != 0 ||
+	    el_wake_init(s->loop, inbox_wake, s, msg, msglen) != 0)
+		return -1;
+
+	s->store = srv_store_open(cfg->data_dir, msg, msglen);
+	if (!s->store)
+		return -1;
+	if (srv_store_repairs(s->store)[0])
+		srv_warn("store %s: %s", cfg->data_dir,
+		         srv_store_repairs(s->store));
+	/* One daemon per data directory. */
+	snprintf(s->lock_path, sizeof(s->lock_path), "%s/luxradd.lock",
+	         cfg->data_dir);
+	s->lock_fd = open(s->lock_path, O_RDWR | O_CREAT | O_CLOEXEC, 0600);
+	if (s->lock_fd < 0 || flock(s->lock_fd, LOCK_EX | LOCK_NB) != 0) {
+		snprintf(msg, msglen, "%s: %s", s->lock_path,
+		         errno == EWOULDBLOCK
+		                 ? "another luxradd uses this data directory"
+		                 : strerror(errno));
+		return -1;
+	}
+	snprintf(s->addr_path, sizeof(s->addr_path), "%s/luxradd.addr",
+	         cfg->data_dir);
+	return 0;
+}
+
+int srv_start_threads(srv *s, char *msg, size_t msglen)
+{
+	int q = s->cfg.query_threads > 0 ? s->cfg.query_threads : 1;
+	if (srv_pool_start(s, &s->store_pool, "store", 1, msg, msglen) != 0 ||
+	    srv_pool_start(s, &s->query_pool, "query", q, msg, msglen) != 0)
+		return -1;
+	return srv_workers_start(s, s->cfg.workers > 0 ? s->cfg.workers : 1,
+	                         msg, msglen);
 }
 
 /* --------------------------------------------------------------- shutdown */
@@ -603,57 +606,27 @@ static void shutdown_progress(srv *s, double now)
 		s->loop_done = 1;
 }
 
-/* Budgets: raise the cancel flag of jobs past their deadline (the
- * progress callback does it too, but some phases report no progress). */
-static void budget_tick(srv *s, double now)
+/*
+ * End of every loop turn: close dead connections, check idle ones and
+ * stuck flushes (every turn, as the daemon always has), move the
+ * shutdown on.
+ */
+static void after_turn(el_loop *l, void *ud)
 {
-	for (srv_job *j = s->jobs; j; j = j->next) {
-		pthread_mutex_lock(&j->mu);
-		if (j->on_worker && j->deadline > 0 && now >= j->deadline &&
-		    !j->replaying)
-			srv_job_raise_cancel_locked(j);
-		pthread_mutex_unlock(&j->mu);
+	srv *s = ud;
+	srv_conn_reap(s);
+	srv_conn_tick(s, rad_seconds());
+	if (s->shutting_down) {
+		shutdown_progress(s, rad_seconds());
+		srv_conn_reap(s);
 	}
-}
-
-/* ------------------------------------------------------------------- loop */
-
-static void handle_event(srv *s, srv_watch *w, uint32_t events)
-{
-	switch (w->kind) {
-	case W_LISTEN: {
-		srv_listener *l = w->ptr;
-		if (l->kind == 2)
-			srv_metrics_accept(s, l->fd);
-		else
-			srv_conn_accept(s, l->fd, l->kind == 0,
-			                srv_token_needed(s, l->needs_token));
-		break;
-	}
-	case W_CONN: {
-		srv_conn *c = w->ptr;
-		if (!c->dead && (events & (EPOLLOUT | EPOLLERR | EPOLLHUP)))
-			srv_conn_writable(s, c);
-		if (!c->dead && (events & (EPOLLIN | EPOLLERR | EPOLLHUP)))
-			srv_conn_readable(s, c);
-		break;
-	}
-	case W_HTTP:
-		srv_http_event(s, w->ptr, events);
-		break;
-	case W_SIGNAL:
-		handle_signals(s);
-		break;
-	case W_WAKE:
-		srv_inbox_drain(s);
-		break;
-	}
+	if (s->loop_done)
+		el_stop(l);
 }
 
 int srv_run(srv *s)
 {
 	char msg[1024];
-	struct epoll_event evs[64];
 
 	if (announce(s, msg, sizeof(msg)) != 0) {
 		srv_error("%s", msg);
@@ -661,23 +634,10 @@ int srv_run(srv *s)
 	}
 	srv_info("ready: %d workers x %d solver threads, %d query threads",
 	         s->nworkers, s->solver_threads, s->query_pool.nthreads);
-	while (!s->loop_done) {
-		int n = epoll_wait(s->epfd, evs, 64, TICK_MS);
-		if (n < 0 && errno != EINTR) {
-			srv_error("epoll_wait: %s", strerror(errno));
-			return 1;
-		}
-		for (int i = 0; i < n; i++)
-			handle_event(s, evs[i].data.ptr, evs[i].events);
-		srv_conn_reap(s);
-		double now = rad_seconds();
-		srv_conn_tick(s, now);
-		srv_metrics_tick(s, now);
-		budget_tick(s, now);
-		srv_mb_tick(s, now);
-		if (s->shutting_down)
-			shutdown_progress(s, now);
-		srv_conn_reap(s);
+	el_after_turn(s->loop, after_turn, s);
+	if (el_run(s->loop, msg, sizeof(msg)) != 0) {
+		srv_error("%s", msg);
+		return 1;
 	}
 	srv_info("stopped");
 	return 0;
@@ -713,12 +673,7 @@ void srv_destroy(srv *s)
 		srv_store_close(s->store);
 	if (s->lock_fd >= 0)
 		close(s->lock_fd); /* never unlinked: a racing start locks it */
-	if (s->epfd >= 0)
-		close(s->epfd);
-	if (s->sigfd >= 0)
-		close(s->sigfd);
-	if (s->wakefd >= 0)
-		close(s->wakefd);
+	el_free(s->loop);
 	if (s->token) {
 		memset(s->token, 0, s->token_len);
 		free(s->token);

@@ -6,7 +6,7 @@
  *
  * Module map (one idea per file):
  *   main.c     argv, startup order, exit codes
- *   server.c   event loop, listeners, signals, timers, shutdown
+ *   server.c   listeners, signals, the loop's turn, shutdown
  *   conn.c     connections: input framing, output queues, limits, auth
  *   cmd.c      command table, dispatch, hello/status/shutdown
  *   scenes.c   scene registry and scene.* commands
@@ -16,6 +16,8 @@
  *   query.c    query.* and export, run on the query threads
  *   qsplit.c   one query's points shared out among the query threads
  *   pool.c     thread pools for tasks, the inbox back to the I/O thread
+ *   observe.c  the observers of jobs (subscriptions, Modbus) and events
+ *   loop/      the event loop (loop.h: watches, timers, wake-up, signals)
  *   persist.c  job rows and checkpoints in the store
  *   recover.c  startup from the store
  *   metrics.c  Prometheus text on a tiny HTTP/1.0 server
@@ -31,6 +33,7 @@
 #include <stdint.h>
 
 #include "config.h"
+#include "loop.h"
 #include "rad.h"
 #include "rp.h"
 #include "sceneio.h"
@@ -204,7 +207,10 @@ void srv_job_unref(srv *s, srv_job *j);
 srv_job *srv_job_find(srv *s, uint64_t id); /* I/O thread */
 /* Allocate with defaults (refs = 1; scene ref taken). */
 srv_job *srv_job_alloc(srv *s, srv_scene *sc);
-void srv_job_register(srv *s, srv_job *j); /* takes the caller's ref */
+/* Registry insert, observers told (takes the caller's ref). */
+void srv_job_register(srv *s, srv_job *j);
+/* Registry removal (the caller keeps the registry's ref), observers told. */
+void srv_job_unregister(srv *s, srv_job *j);
 /* Queue a job to run: state := queued (caller holds j->mu). */
 void srv_job_enqueue_locked(srv *s, srv_job *j);
 /* Raise the engine's cancel flag (caller holds j->mu). */
@@ -278,7 +284,7 @@ void srv_pool_stop(srv_pool *p);
 
 typedef enum msg_kind {
 	MSG_TASK_DONE = 0, /* a task finished: run its done() */
-	MSG_EVENT,         /* an encoded event for a job's subscribers */
+	MSG_EVENT,         /* a job event for the observers */
 } msg_kind;
 
 typedef enum ev_kind {
@@ -287,26 +293,34 @@ typedef enum ev_kind {
 	EV_STATE,
 } ev_kind;
 
+/* A job event, as observers receive it (the data, never a frame). */
+typedef struct srv_event {
+	ev_kind kind;
+	uint64_t job;
+	uint32_t iteration;  /* PROGRESS: the one under way */
+	double fraction;     /* PROGRESS: of that iteration */
+	double elapsed_s;    /* PROGRESS: since the step began */
+	rad_stats stats;     /* ITERATION: after it */
+	srv_job_state state; /* STATE: the new state */
+	uint64_t seq;        /* STATE: the job's state_seq after the change */
+	int fresh;           /* STATE: newer than every state reported before */
+	char error[512];     /* STATE, failed: why */
+} srv_event;
+
 typedef struct srv_msg {
 	struct srv_msg *next;
 	msg_kind kind;
-	srv_task *task;      /* MSG_TASK_DONE */
-	uint64_t job;        /* MSG_EVENT */
-	ev_kind ev;          /* MSG_EVENT */
-	unsigned char *data; /* encoded frame (owned) */
-	size_t len;
-	uint64_t seq;  /* EV_STATE: the job's state_seq after the change */
-	uint32_t iter; /* EV_ITERATION: the iteration it reports */
+	srv_task *task; /* MSG_TASK_DONE */
+	srv_event ev;   /* MSG_EVENT */
 } srv_msg;
 
 /* Post to the I/O thread and wake it (any thread). */
 void srv_inbox_post(srv *s, srv_msg *m);
 /* Post a task's completion. */
 void srv_task_finish(srv *s, srv_task *t);
-/* Build and post an event frame from a header object (stolen). */
-void srv_event_post(srv *s, uint64_t job, ev_kind ev, json_t *hdr, uint64_t seq,
-                    uint32_t iter);
-/* I/O thread: drain the inbox. */
+/* Post a job event (copied) for the observers (any thread). */
+void srv_event_post(srv *s, const srv_event *ev);
+/* I/O thread: drain the inbox (on the loop's wake-up). */
 void srv_inbox_drain(srv *s);
 
 /* ------------------------------------------------------------ connections */
@@ -325,21 +339,8 @@ typedef struct srv_sub {
 	uint32_t iter0;   /* iteration told in the subscribe reply */
 } srv_sub;
 
-typedef enum watch_kind {
-	W_LISTEN = 0,
-	W_CONN,
-	W_HTTP,
-	W_SIGNAL,
-	W_WAKE,
-} watch_kind;
-
-typedef struct srv_watch {
-	watch_kind kind;
-	void *ptr;
-} srv_watch;
-
 struct srv_conn {
-	srv_watch w;
+	el_watch w; /* ud: the srv */
 	uint64_t id;
 	int fd;
 	int listener_tcp;  /* accepted on TCP (else Unix) */
@@ -368,8 +369,6 @@ struct srv_conn {
 
 srv_conn *srv_conn_find(srv *s, uint64_t id);
 void srv_conn_accept(srv *s, int lfd, int tcp, int needs_token);
-void srv_conn_readable(srv *s, srv_conn *c);
-void srv_conn_writable(srv *s, srv_conn *c);
 /* Queue bytes (ownership of buf taken); flushes what the socket takes. */
 int srv_conn_send(srv *s, srv_conn *c, unsigned char *buf, size_t len);
 /* Encode and queue a JSON frame (header not stolen). */
@@ -387,7 +386,7 @@ void srv_conn_unbusy(srv *s, srv_conn *c);
 void srv_conn_free_all(srv *s);
 /* Close dead connections (I/O thread, end of a loop turn). */
 void srv_conn_reap(srv *s);
-/* Timers: idle connections, stuck flushes. */
+/* Idle connections, stuck flushes (end of every loop turn). */
 void srv_conn_tick(srv *s, double now);
 /* Reading paused/unpaused by busy / output pressure. */
 void srv_conn_update_events(srv *s, srv_conn *c);
@@ -473,23 +472,38 @@ cmd_result srv_job_store_delete(srv_req *r, srv_job *j);
 /* Map an engine status to a wire error code. */
 rp_err srv_err_from_rad(rad_status st);
 
-/* publish.c (I/O thread) */
-void srv_publish_event(srv *s, srv_msg *m);
+/* observe.c: observers of the core (I/O thread). */
+typedef struct srv_observer {
+	/* srv_recover has restored the registries (0, or -1 with msg). */
+	int (*recovered)(void *ud, char *msg, size_t msglen);
+	/* A job was created (after recovery; restored ones: recovered). */
+	void (*job_added)(void *ud, srv_job *j);
+	void (*job_event)(void *ud, srv_job *j, const srv_event *ev);
+	/* A job left the registry (job.delete). */
+	void (*job_gone)(void *ud, srv_job *j);
+} srv_observer;
+#define SRV_MAX_OBSERVERS 4
+/* Called in registration order; -1 when the table is full. */
+int srv_observe(srv *s, const srv_observer *ops, void *ud);
+/* Tell the observers (srv_recover's end; after it, jobs are "live"). */
+int srv_observers_recovered(srv *s, char *msg, size_t msglen);
+void srv_job_added(srv *s, srv_job *j);
+void srv_job_gone(srv *s, srv_job *j);
+/* An event reached the I/O thread: to every observer. */
+void srv_event_dispatch(srv *s, srv_event *ev);
+/* The state event of a job (caller holds j->mu). */
+void srv_state_event_locked(const srv_job *j, srv_event *ev);
 /* The I/O thread changed a job's state (caller released mu): tell the
- * subscribers now. */
-void srv_publish_state_now(srv *s, srv_job *j);
-/* State event for a job (any thread, caller holds j->mu): the header. */
-json_t *srv_state_event_locked(const srv_job *j);
-/* A job was deleted: its subscriptions end, owed replies are sent. */
-void srv_publish_job_gone(srv *s, srv_job *j);
-/* Reply to waiters if the job has left its worker. */
-void srv_job_complete_waiters(srv *s, srv_job *j);
+ * observers now. */
+void srv_job_state_changed(srv *s, srv_job *j);
+
+/* publish.c: subscriptions (an observer) and job waiters. */
+int srv_subs_start(srv *s);
 int srv_job_add_waiter(srv_job *j, uint64_t conn_id, json_t *id);
 
 /* metrics.c */
+/* Accept on the metrics listener; the first call starts its timer. */
 void srv_metrics_accept(srv *s, int lfd);
-void srv_http_event(srv *s, void *h, uint32_t events);
-void srv_metrics_tick(srv *s, double now);
 void srv_metrics_free_all(srv *s);
 /* Jobs and memory summary shared by status and /metrics (I/O thread). */
 typedef struct srv_summary {
@@ -512,20 +526,6 @@ int srv_mb_start(srv *s, char *msg, size_t msglen);
 void srv_mb_stop(srv *s);
 /* "modbus HOST:PORT" for luxradd.addr; 0 when the server is off. */
 int srv_mb_addr_text(srv *s, char *buf, size_t len);
-/* Daemon block (memory, uptime): at most once a second. */
-void srv_mb_tick(srv *s, double now);
-/* A job exists (created or restored): its values, its sensors declared. */
-void srv_mb_job_added(srv *s, srv_job *j);
-/* In srv_recover, once the jobs are back: their sensor.add sensors
- * (0, or -1 with msg when the store cannot be read). */
-int srv_mb_sensors_restore(srv *s, char *msg, size_t msglen);
-/* After srv_recover: every restored job, in id order. */
-void srv_mb_recovered(srv *s);
-/* A job event reached the I/O thread (or the I/O thread changed the
- * state): republish the job; after an iteration, evaluate its sensors
- * on the new solution (query pool). */
-void srv_mb_job_event(srv *s, srv_job *j, ev_kind ev);
-void srv_mb_job_gone(srv *s, srv_job *j);
 json_t *srv_mb_status_json(srv *s);
 char *srv_mb_metrics_text(srv *s); /* Prometheus lines, malloc'ed */
 cmd_result srv_cmd_sensor_add(srv_req *r);
@@ -536,7 +536,7 @@ cmd_result srv_cmd_sensor_list(srv_req *r);
 #define SRV_MAX_LISTENERS 3
 
 typedef struct srv_listener {
-	srv_watch w;
+	el_watch w; /* ud: the srv */
 	int fd;
 	int kind;        /* 0 tcp, 1 unix, 2 metrics */
 	int needs_token; /* tcp beyond loopback */
@@ -552,8 +552,7 @@ struct srv {
 	pthread_mutex_t store_mu; /* serialises every store call */
 
 	/* I/O thread */
-	int epfd, sigfd, wakefd;
-	srv_watch sig_w, wake_w;
+	el_loop *loop;
 	srv_listener lis[SRV_MAX_LISTENERS];
 	int nlis;
 	srv_conn *conns;
@@ -561,6 +560,7 @@ struct srv {
 	uint64_t next_conn_id;
 	void *https; /* metrics.c's connection list */
 	int nhttps;
+	uint64_t http_timer; /* metrics.c's timer, once a request came */
 	srv_scene *scenes;
 	int nscenes, scenes_pending; /* pending: uploads in flight */
 	srv_job *jobs;
@@ -597,6 +597,13 @@ struct srv {
 	atomic_int stopping;           /* workers: checkpoint and stop */
 	atomic_llong sol_bytes;        /* live published solutions */
 	atomic_llong ckpt_interval_ms; /* checkpoint_interval_s */
+
+	struct {
+		const srv_observer *ops;
+		void *ud;
+	} obs[SRV_MAX_OBSERVERS]; /* I/O thread */
+	int nobs;
+	int live; /* recovery done: new jobs are told to observers */
 
 	struct mb_server *mb;    /* Modbus server (NULL when off) */
 	struct srv_mbpub *mbpub; /* mbpub.c's state (I/O thread) */
