@@ -190,18 +190,6 @@ rad_status rad_scene_add_node(rad_scene *s, const char *name, uint32_t *id,
 
 /* ------------------------------------------------------------- triangles */
 
-enum rad_poly_verdict rad_poly_check_stored(const rad_poly *p, double area,
-                                            v3 n)
-{
-	v3 cf = v3_cross(v3_f(p->e1), v3_f(p->e2));
-	double lf = v3_len(cf);
-	if (!isfinite((float)area) || !isfinite(lf))
-		return RAD_POLY_NONFINITE;
-	if ((float)area == 0.0f || !(v3_dot(cf, n) > FLOAT_NORMAL_COS * lf))
-		return RAD_POLY_DEGENERATE;
-	return RAD_POLY_OK;
-}
-
 /*
  * Turn one input triangle into a stored polygon and its staged vertices.
  * Coordinates beyond float range count as non-finite: they would be
@@ -614,17 +602,6 @@ static rad_status merge_quads(rad_scene *s, rad_error *err)
 	s->stage = NULL;
 	rad_scene_fit_polys(s);
 	return RAD_OK;
-}
-
-void rad_scene_fit_polys(rad_scene *s)
-{
-	/* Keeping the old block when realloc fails is harmless. */
-	rad_poly *fit = rad_mem_realloc(&s->mem, RAD_MEM_GEOMETRY, s->polys,
-	                                (size_t)s->npolys * sizeof(*s->polys));
-	if (fit) {
-		s->polys = fit;
-		s->cap_polys = s->npolys;
-	}
 }
 
 /* -------------------------------------------------------- bounds and flux */

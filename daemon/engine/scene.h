@@ -95,12 +95,30 @@ enum rad_poly_verdict { RAD_POLY_OK, RAD_POLY_NONFINITE, RAD_POLY_DEGENERATE };
  * still giving n (FLOAT_NORMAL_COS).  Input triangles and the pieces of
  * cut polygons are both held to it.
  */
-enum rad_poly_verdict rad_poly_check_stored(const rad_poly *p, double area,
-                                            v3 n);
+static inline enum rad_poly_verdict rad_poly_check_stored(const rad_poly *p,
+                                                          double area, v3 n)
+{
+	v3 cf = v3_cross(v3_f(p->e1), v3_f(p->e2));
+	double lf = v3_len(cf);
+	if (!isfinite((float)area) || !isfinite(lf))
+		return RAD_POLY_NONFINITE;
+	if ((float)area == 0.0f || !(v3_dot(cf, n) > FLOAT_NORMAL_COS * lf))
+		return RAD_POLY_DEGENERATE;
+	return RAD_POLY_OK;
+}
 
 /* Shrink the polygon array to its count (the memory merging or cutting
  * freed goes back). */
-void rad_scene_fit_polys(rad_scene *s);
+static inline void rad_scene_fit_polys(rad_scene *s)
+{
+	/* Keeping the old block when realloc fails is harmless. */
+	rad_poly *fit = rad_mem_realloc(&s->mem, RAD_MEM_GEOMETRY, s->polys,
+	                                (size_t)s->npolys * sizeof(*s->polys));
+	if (fit) {
+		s->polys = fit;
+		s->cap_polys = s->npolys;
+	}
+}
 
 /* Cut the large polygons along the lines where other polygons run right
  * across them (conform.c); at commit, after quad merging and bounds. */

@@ -35,27 +35,6 @@ const char *rad_solver_kind_name(rad_solver_kind k)
 	return (unsigned)k < RAD_SOLVER_NKINDS ? solver_table[k]->name : "?";
 }
 
-double rad_error_estimate(double r_prev, double r_now)
-{
-	if (!(r_now > 0))
-		return 0;
-	if (!(r_prev > 0))
-		return r_now; /* first iteration: no rate known yet */
-	double q = r_now / r_prev;
-	/* A rate near or above 1 (refinement just changed the solution)
-	 * tells nothing about the tail: report a large, finite estimate. */
-	if (q >= 0.999)
-		return r_now * 1000.0;
-	return r_now * q / (1.0 - q);
-}
-
-void rad_solver_set_residual(rad_solver *sv, double r)
-{
-	sv->stats.residual = r;
-	sv->stats.error_estimate = rad_error_estimate(sv->prev_residual, r);
-	sv->prev_residual = r;
-}
-
 rad_status rad_solver_new(const rad_scene *scene, const rad_options *opt,
                           rad_solver **out, rad_error *err)
 {

@@ -62,9 +62,26 @@ static inline void rad_solver_progress(const rad_solver *sv, double f)
  * Estimate the remaining relative error from the last two residuals of a
  * linearly converging iteration: r_k q / (1 - q) with q = r_k / r_{k-1}.
  */
-double rad_error_estimate(double r_prev, double r_now);
+static inline double rad_error_estimate(double r_prev, double r_now)
+{
+	if (!(r_now > 0))
+		return 0;
+	if (!(r_prev > 0))
+		return r_now; /* first iteration: no rate known yet */
+	double q = r_now / r_prev;
+	/* A rate near or above 1 (refinement just changed the solution)
+	 * tells nothing about the tail: report a large, finite estimate. */
+	if (q >= 0.999)
+		return r_now * 1000.0;
+	return r_now * q / (1.0 - q);
+}
 /* Publish a step's residual and the error estimate it gives. */
-void rad_solver_set_residual(rad_solver *sv, double r);
+static inline void rad_solver_set_residual(rad_solver *sv, double r)
+{
+	sv->stats.residual = r;
+	sv->stats.error_estimate = rad_error_estimate(sv->prev_residual, r);
+	sv->prev_residual = r;
+}
 
 /*
  * Queries over any hierarchy (query.c): a solver's own, or a published

@@ -23,30 +23,11 @@
  *    the commit).  Sensors are new to the walk: a scene that declares
  *    some can read a few bytes differently.
  */
-#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "internal.h"
-
-void sio_note(sio_info *info, const char *fmt, ...)
-{
-	if (!info)
-		return;
-	size_t used = strlen(info->warnings);
-	size_t cap = sizeof(info->warnings);
-	if (used && used + 2 < cap) {
-		memcpy(info->warnings + used, "; ", 3);
-		used += 2;
-	}
-	if (used + 1 >= cap)
-		return;
-	va_list ap;
-	va_start(ap, fmt);
-	vsnprintf(info->warnings + used, cap - used, fmt, ap);
-	va_end(ap);
-}
 
 /* Refuse documents that need an extension we do not implement. */
 static rad_status check_required(const sio_doc *d, rad_error *err)

@@ -1,0 +1,28 @@
+/*
+ * info.c -- the load report (sio_info): notes appended as a scene is read,
+ * by the parser's shim and the importer alike, "; " between them and cut
+ * at the report's size.
+ */
+#include <stdarg.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "internal.h"
+
+void sio_note(sio_info *info, const char *fmt, ...)
+{
+	if (!info)
+		return;
+	size_t used = strlen(info->warnings);
+	size_t cap = sizeof(info->warnings);
+	if (used && used + 2 < cap) {
+		memcpy(info->warnings + used, "; ", 3);
+		used += 2;
+	}
+	if (used + 1 >= cap)
+		return;
+	va_list ap;
+	va_start(ap, fmt);
+	vsnprintf(info->warnings + used, cap - used, fmt, ap);
+	va_end(ap);
+}
