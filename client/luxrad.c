@@ -120,7 +120,8 @@ static const cmd_def commands[] = {
          "add a named illuminance sensor to a job (Modbus)",
          "The daemon evaluates the sensor after every iteration, as luxrad "
          "query\n--points would, and publishes its lux in a Modbus sensor "
-         "slot\n(daemon/server/MODBUS.md). The normal is that of the surface "
+         "slot\n(daemon/server/modbus/MODBUS.md). The normal is that of the "
+         "surface "
          "the sensor\nlies on (upward by default, for a work plane). The "
          "sensor is stored with\nthe job: it survives a daemon restart and "
          "goes when the job is deleted.\nNAME is 1..63 bytes.\n\nExamples:\n"

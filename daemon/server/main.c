@@ -16,12 +16,12 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "cmd.h"
 #include "log.h"
-#include "server.h"
 
 int main(int argc, char **argv)
 {
-	static srv s; /* large (paths, listeners): not on the stack */
+	static cmd_server d; /* large (paths, listeners): not on the stack */
 	srv_config cfg;
 	char msg[2048] = "";
 	int rc;
@@ -38,19 +38,19 @@ int main(int argc, char **argv)
 	srv_info("luxradd %s starting (data directory %s)", SRV_VERSION,
 	         cfg.data_dir);
 
-	rc = srv_init(&s, &cfg, argc, argv, msg, sizeof(msg));
+	rc = cmd_server_init(&d, &cfg, argc, argv, msg, sizeof(msg));
 	if (rc == 0)
-		rc = srv_listen(&s, msg, sizeof(msg));
-	if (rc == 0 && srv_recover(&s, msg, sizeof(msg)) != 0)
+		rc = cmd_server_listen(&d, msg, sizeof(msg));
+	if (rc == 0 && srv_recover(&d.core, msg, sizeof(msg)) != 0)
 		rc = -1;
-	if (rc == 0 && srv_start_threads(&s, msg, sizeof(msg)) != 0)
+	if (rc == 0 && cmd_server_start(&d, msg, sizeof(msg)) != 0)
 		rc = -1;
 	if (rc != 0) {
 		srv_error("%s", msg);
-		srv_destroy(&s);
+		cmd_server_destroy(&d);
 		return rc == -2 ? 2 : 1;
 	}
-	rc = srv_run(&s);
-	srv_destroy(&s);
+	rc = cmd_server_run(&d);
+	cmd_server_destroy(&d);
 	return rc;
 }

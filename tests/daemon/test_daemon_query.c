@@ -273,7 +273,7 @@ static void test_query_points_equal_luxrad_solve(void **state)
 
 /*
  * A big query.points is shared out among the query threads in chunks
- * (qsplit.c): its values must be those of the same points asked a few at
+ * (core/qsplit.c): its values must be those of the same points asked a few at
  * a time (below one chunk, so each on one thread), to the last bit.
  */
 static void test_split_query_equals_small_queries(void **state)

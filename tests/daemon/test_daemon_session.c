@@ -381,7 +381,7 @@ static void require_family(const char *body, const char *name)
 }
 
 /*
- * The families luxradd serves (daemon/server/metrics.c; PROTOCOL.md
+ * The families luxradd serves (daemon/server/cmd/metrics.c; PROTOCOL.md
  * leaves /metrics out of the protocol).
  */
 static const char *const families[] = {

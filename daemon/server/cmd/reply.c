@@ -1,0 +1,95 @@
+/*
+ * reply.c -- what every command handler shares: failing a request,
+ * mapping an engine status to a wire code, finding the job a request
+ * names, and delivering a reply that was deferred (a task or a waiter
+ * finished) to a connection that may be gone by then.
+ */
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+
+#include "cmd.h"
+
+cmd_result cmd_req_fail(cmd_req *r, rp_err code, const char *fmt, ...)
+{
+	va_list ap;
+	r->err.code = code;
+	va_start(ap, fmt);
+	vsnprintf(r->err.msg, sizeof(r->err.msg), fmt, ap);
+	va_end(ap);
+	return CMD_ERROR;
+}
+
+/*
+ * Every engine status has a wire code.  The switch has no default on
+ * purpose: a status added to rad.h and not mapped here is a -Wswitch
+ * warning, an error in CI's -Werror build.
+ */
+rp_err cmd_err_from_rad(rad_status st)
+{
+	switch (st) {
+	case RAD_OK:
+		return RP_ERR_OK;
+	case RAD_ERR_NOMEM:
+	case RAD_ERR_LIMIT:
+		return RP_ERR_NOMEM;
+	case RAD_ERR_INVALID:
+	case RAD_ERR_UNSUPPORTED:
+		return RP_ERR_INVALID;
+	case RAD_ERR_STATE:
+	case RAD_ERR_CANCELLED:
+		return RP_ERR_STATE;
+	case RAD_ERR_IO:
+		return RP_ERR_IO;
+	case RAD_ERR_EMBREE:
+		break;
+	}
+	return RP_ERR_INTERNAL;
+}
+
+srv_job *cmd_req_job(cmd_req *r, int *failed)
+{
+	uint64_t id = 0;
+	*failed = 1;
+	if (rp_arg_u64(r->hdr, "job", 1, &id, &r->err) != 0)
+		return NULL;
+	srv_job *j = srv_job_find(r->s, id);
+	if (!j) {
+		cmd_req_fail(r, RP_ERR_NOT_FOUND, "no job %llu",
+		             (unsigned long long)id);
+		return NULL;
+	}
+	*failed = 0;
+	return j;
+}
+
+void cmd_reply_deferred(cmd_server *d, uint64_t conn_id, json_t *reply)
+{
+	cmd_conn *c = cmd_conn_find(d, conn_id);
+	if (c && reply) {
+		cmd_conn_send_json(d, c, reply);
+		json_t *e = json_object_get(reply, "error");
+		const char *code =
+		        json_string_value(json_object_get(e, "code"));
+		if (code && rp_err_closes(rp_err_parse(code)))
+			cmd_conn_close_after_flush(d, c);
+	}
+	json_decref(reply);
+	if (c)
+		cmd_conn_unbusy(d, c);
+}
+
+void cmd_reply_deferred_raw(cmd_server *d, uint64_t conn_id, unsigned char *buf,
+                            size_t len, unsigned char *payload, size_t plen)
+{
+	cmd_conn *c = cmd_conn_find(d, conn_id);
+	if (!c) {
+		free(buf);
+		free(payload);
+		return;
+	}
+	cmd_conn_send(d, c, buf, len);
+	if (payload)
+		cmd_conn_send(d, c, payload, plen);
+	cmd_conn_unbusy(d, c);
+}

@@ -1,0 +1,218 @@
+/*
+ * scene_cmd.c -- the scene.* commands: upload, list, info, delete.
+ *
+ * Uploads and deletions run on the store thread (a large upload parses
+ * for seconds); the upload task takes the connection's input buffer with
+ * the payload in it instead of copying it.  scene.delete refuses while a
+ * job uses the scene (njobs counts jobs being created too) and removes it
+ * from the registry at once (status stops counting it); the engine scene
+ * is freed when the last reference goes (core/scenes.c).
+ */
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "cmd.h"
+#include "log.h"
+
+/* ----------------------------------------------------------------- upload */
+
+typedef struct upload_task {
+	srv_task t;
+	unsigned char *buf;           /* the connection's input buffer */
+	const unsigned char *payload; /* inside buf */
+	size_t len;
+	char name[256];
+	srv_scene *sc; /* result */
+	rp_err code;   /* error */
+	char msg[600];
+} upload_task;
+
+static void upload_run(srv *s, srv_task *t)
+{
+	upload_task *u = (upload_task *)t;
+	rad_error err = {0};
+
+	int rc = srv_scene_create(s, u->name, u->payload, u->len, &u->sc, &err);
+	if (rc == -1) {
+		u->code = cmd_err_from_rad(err.code);
+		snprintf(u->msg, sizeof(u->msg), "scene refused: %s", err.msg);
+	} else if (rc != 0) {
+		u->code = RP_ERR_IO;
+		snprintf(u->msg, sizeof(u->msg), "cannot store the scene: %s",
+		         err.msg);
+	}
+	free(u->buf);
+	u->buf = NULL;
+}
+
+static void upload_done(srv *s, srv_task *t)
+{
+	upload_task *u = (upload_task *)t;
+	json_t *reply;
+
+	s->scenes_pending--;
+	if (u->sc) {
+		srv_scene_register(s, u->sc);
+		reply = rp_reply_ok(t->id);
+		json_t *body = srv_scene_json(u->sc);
+		json_object_update(reply, body);
+		json_decref(body);
+	} else {
+		reply = rp_reply_error(t->id, u->code, "%s", u->msg);
+	}
+	cmd_reply_deferred(cmd_of(s), t->conn_id, reply);
+	json_decref(t->id);
+	free(u);
+}
+
+cmd_result cmd_scene_upload(cmd_req *r)
+{
+	srv *s = r->s;
+	const char *name = NULL;
+
+	if (rp_arg_string(r->hdr, "name", 0, &name, &r->err) < 0)
+		return CMD_ERROR;
+	if (name && strlen(name) > 255)
+		return cmd_req_fail(r, RP_ERR_BAD_REQUEST,
+		                    "\"name\" is longer than 255 bytes");
+	if (!r->payload)
+		return cmd_req_fail(r, RP_ERR_BAD_REQUEST,
+		                    "scene.upload needs the scene as a payload "
+		                    "(\"bytes\": N, then N bytes)");
+	if (s->nscenes + s->scenes_pending >= s->cfg.max_scenes)
+		return cmd_req_fail(r, RP_ERR_LIMIT,
+		                    "max_scenes (%d) scenes exist: delete one "
+		                    "first",
+		                    s->cfg.max_scenes);
+	upload_task *u = calloc(1, sizeof(*u));
+	if (!u)
+		return cmd_req_fail(r, RP_ERR_NOMEM, "out of memory");
+	size_t off = (size_t)(r->payload - (r->c->in + r->c->in_off));
+	size_t in_off = r->c->in_off;
+	u->buf = cmd_conn_steal_input(r->c, r->frame_used);
+	if (!u->buf) {
+		free(u);
+		return cmd_req_fail(r, RP_ERR_NOMEM, "out of memory");
+	}
+	u->payload = u->buf + in_off + off;
+	u->len = r->payload_len;
+	snprintf(u->name, sizeof(u->name), "%s", name ? name : "");
+	u->t.run = upload_run;
+	u->t.done = upload_done;
+	u->t.conn_id = r->c->id;
+	u->t.id = json_incref(r->id);
+	s->scenes_pending++;
+	srv_pool_submit(&s->store_pool, &u->t);
+	return CMD_DEFERRED;
+}
+
+/* ------------------------------------------------------------ list / info */
+
+cmd_result cmd_scene_list(cmd_req *r)
+{
+	json_t *arr = json_array();
+	for (srv_scene *sc = r->s->scenes; sc; sc = sc->next) {
+		json_t *o = json_object();
+		json_object_set_new(o, "id", json_integer((json_int_t)sc->id));
+		json_object_set_new(o, "name", json_string(sc->name));
+		json_object_set_new(o, "bytes",
+		                    json_integer((json_int_t)sc->bytes));
+		json_object_set_new(o, "polygons",
+		                    json_integer(sc->counts.polygons));
+		json_object_set_new(o, "jobs", json_integer(sc->njobs));
+		json_object_set_new(o, "memory_bytes",
+		                    json_integer(sc->mem.total));
+		json_object_set_new(o, "created", json_real(sc->created));
+		json_array_append_new(arr, o);
+	}
+	json_object_set_new(r->res, "scenes", arr);
+	return CMD_REPLY;
+}
+
+static srv_scene *req_scene(cmd_req *r)
+{
+	uint64_t id = 0;
+	if (rp_arg_u64(r->hdr, "scene", 1, &id, &r->err) != 0)
+		return NULL;
+	srv_scene *sc = srv_scene_find(r->s, id);
+	if (!sc)
+		cmd_req_fail(r, RP_ERR_NOT_FOUND, "no scene %llu",
+		             (unsigned long long)id);
+	return sc;
+}
+
+cmd_result cmd_scene_info(cmd_req *r)
+{
+	srv_scene *sc = req_scene(r);
+	if (!sc)
+		return CMD_ERROR;
+	json_t *body = srv_scene_json(sc), *jobs = json_array();
+	for (srv_job *j = r->s->jobs; j; j = j->next)
+		if (j->scene == sc)
+			json_array_append_new(jobs,
+			                      json_integer((json_int_t)j->id));
+	json_object_update(r->res, body);
+	json_decref(body);
+	json_object_set_new(r->res, "jobs", jobs);
+	return CMD_REPLY;
+}
+
+/* ----------------------------------------------------------------- delete */
+
+typedef struct scene_del_task {
+	srv_task t;
+	uint64_t scene;
+	int failed;
+	char msg[512];
+} scene_del_task;
+
+static void scene_del_run(srv *s, srv_task *t)
+{
+	scene_del_task *dt = (scene_del_task *)t;
+	dt->failed =
+	        srv_scene_forget(s, dt->scene, dt->msg, sizeof(dt->msg)) != 0;
+}
+
+static void scene_del_done(srv *s, srv_task *t)
+{
+	scene_del_task *dt = (scene_del_task *)t;
+	json_t *reply;
+	if (dt->failed)
+		reply = rp_reply_error(
+		        t->id, RP_ERR_IO,
+		        "scene %llu was freed but its file could "
+		        "not be removed: %s",
+		        (unsigned long long)dt->scene, dt->msg);
+	else
+		reply = rp_reply_ok(t->id);
+	cmd_reply_deferred(cmd_of(s), t->conn_id, reply);
+	json_decref(t->id);
+	free(dt);
+}
+
+cmd_result cmd_scene_delete(cmd_req *r)
+{
+	srv *s = r->s;
+	srv_scene *sc = req_scene(r);
+	if (!sc)
+		return CMD_ERROR;
+	if (sc->njobs > 0)
+		return cmd_req_fail(r, RP_ERR_BUSY,
+		                    "scene %llu is used by %d job%s: delete "
+		                    "them first",
+		                    (unsigned long long)sc->id, sc->njobs,
+		                    sc->njobs == 1 ? "" : "s");
+	scene_del_task *dt = calloc(1, sizeof(*dt));
+	if (!dt)
+		return cmd_req_fail(r, RP_ERR_NOMEM, "out of memory");
+	srv_scene_unregister(s, sc);
+	dt->scene = sc->id;
+	srv_scene_unref(sc);
+	dt->t.run = scene_del_run;
+	dt->t.done = scene_del_done;
+	dt->t.conn_id = r->c->id;
+	dt->t.id = json_incref(r->id);
+	srv_pool_submit(&s->store_pool, &dt->t);
+	return CMD_DEFERRED;
+}
