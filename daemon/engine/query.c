@@ -63,7 +63,7 @@
 #include <math.h>
 #include <string.h>
 
-#include "query.h"
+#include "query_vis.h"
 
 #define THETA 0.5      /* far enough: size < THETA x distance */
 #define FLOOR_REL 1e-3 /* running total floor, x scene mean exitance */

@@ -24,7 +24,7 @@
  * what lets the first large source a point meets be resolved neither too
  * coarsely nor to the bottom.
  */
-#include "query.h"
+#include "query_vis.h"
 
 #include <math.h>
 #include <string.h>

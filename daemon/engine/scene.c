@@ -1,6 +1,6 @@
 /*
  * scene.c -- the scene builder: validated input, shared materials,
- * parallelogram merging, bounds and flux, then the BVH (vis.c).
+ * lights, nodes; commit.c turns what it gathered into a committed scene.
  *
  * Input arrives as loose triangles in double precision.  Each triangle is
  * checked once here (finite, not degenerate) so that nothing downstream
@@ -16,19 +16,10 @@
  *   are kept beside it (s->stage) until commit: shared vertices of a mesh
  *   round to bit-identical floats, which lets the merger find shared edges
  *   by exact key instead of by a tolerance search.
- * - At commit, pairs of triangles that share an edge and together form a
- *   parallelogram become one quad (half the elements, half the links for
- *   the very common case of rectangles exported as two triangles).
- *   Matching is greedy in input order, each triangle preferring its
- *   longest edge as the diagonal, which pairs the usual grid
- *   triangulations into their cells rather than into skewed neighbours.
  * - The rad_scene struct itself is allocated with plain calloc and is not
  *   counted: it holds the counters, so counting it would leave the report
  *   non-zero at the moment the last counted byte goes away.  Everything it
  *   points to is counted; after rad_scene_free() every kind is zero.
- * - A failed commit leaves the scene uncommitted and may be retried (the
- *   merge is skipped once done: s->stage is gone); once merged, the scene
- *   takes no more triangles.
  */
 #include <float.h>
 #include <stdlib.h>
@@ -36,16 +27,10 @@
 
 #include "rad.h"
 #include "scene.h"
-#include "vis.h"
 
 /* Ids stay far below RAD_NONE and the tag bits of hier.h; the edge map
  * (4 slots per triangle) fits 32-bit indices. */
 #define MAX_IDS (1u << 28)
-
-/* Quad merging: coplanarity as 1 - cos between normals, parallelogram
- * closure relative to the longest edge. */
-#define MERGE_COPLANAR 1e-6
-#define MERGE_CLOSE_REL 1e-6
 
 rad_status rad_scene_new(rad_scene **out, rad_error *err)
 {
@@ -81,8 +66,8 @@ static int finite3(const double v[3])
 	return isfinite(v[0]) && isfinite(v[1]) && isfinite(v[2]);
 }
 
-static rad_status check_open(const rad_scene *s, const char *what,
-                             rad_error *err)
+rad_status rad_scene_check_open(const rad_scene *s, const char *what,
+                                rad_error *err)
 {
 	if (s->committed)
 		return rad_fail(err, RAD_ERR_STATE,
@@ -139,7 +124,7 @@ rad_status rad_scene_add_material(rad_scene *s, const double reflectance[3],
                                   const double luminance[3], uint32_t *id,
                                   rad_error *err)
 {
-	rad_status st = check_open(s, "material", err);
+	rad_status st = rad_scene_check_open(s, "material", err);
 	if (st)
 		return st;
 	rad_material m;
@@ -170,7 +155,7 @@ rad_status rad_scene_add_material(rad_scene *s, const double reflectance[3],
 rad_status rad_scene_add_node(rad_scene *s, const char *name, uint32_t *id,
                               rad_error *err)
 {
-	rad_status st = check_open(s, "node", err);
+	rad_status st = rad_scene_check_open(s, "node", err);
 	if (st)
 		return st;
 	if (s->nnodes >= MAX_IDS)
@@ -256,7 +241,7 @@ rad_status rad_scene_add_triangles(rad_scene *s, uint32_t material,
                                    uint32_t node, const double *xyz,
                                    size_t ntri, rad_error *err)
 {
-	rad_status st = check_open(s, "triangles", err);
+	rad_status st = rad_scene_check_open(s, "triangles", err);
 	if (st)
 		return st;
 	if (material >= s->nmats)
@@ -349,7 +334,7 @@ static rad_status check_light(const rad_light_desc *d, uint32_t which,
 rad_status rad_scene_add_light(rad_scene *s, const rad_light_desc *d,
                                rad_error *err)
 {
-	rad_status st = check_open(s, "light", err);
+	rad_status st = rad_scene_check_open(s, "light", err);
 	if (st || (st = check_light(d, s->nlights, err)))
 		return st;
 	if (s->nlights >= MAX_IDS)
@@ -382,338 +367,6 @@ rad_status rad_scene_add_light(rad_scene *s, const rad_light_desc *d,
 	return RAD_OK;
 }
 
-/* ---------------------------------------------------------- quad merging */
-
-/* Directed edge k of staged triangle t runs from vertex k to vertex k+1. */
-static const float *stage_vertex(const float *stage, uint32_t t, int k)
-{
-	return stage + (size_t)9 * t + 3 * (k % 3);
-}
-
-static uint32_t edge_hash(const float *a, const float *b)
-{
-	uint32_t h = 0x811c9dc5u;
-	for (int i = 0; i < 6; i++) {
-		uint32_t bits;
-		memcpy(&bits, i < 3 ? a + i : b + i - 3, sizeof(bits));
-		h = (h ^ bits) * 0x01000193u;
-		h ^= h >> 15;
-	}
-	return h * 0x9e3779b1u;
-}
-
-typedef struct edge_map {
-	const float *stage;
-	uint32_t *slot; /* t*3 + k of a directed edge, or RAD_NONE; SCRATCH */
-	uint32_t mask;  /* capacity - 1 (a power of two) */
-} edge_map;
-
-static int same_point(const float *a, const float *b)
-{
-	return a[0] == b[0] && a[1] == b[1] && a[2] == b[2];
-}
-
-/* Slot holding the directed edge a -> b, or the empty slot ending the
- * probe sequence. */
-static uint32_t *edge_probe(const edge_map *m, const float *a, const float *b)
-{
-	uint32_t i = edge_hash(a, b) & m->mask;
-	for (;; i = (i + 1) & m->mask) {
-		uint32_t e = m->slot[i];
-		if (e == RAD_NONE)
-			return &m->slot[i];
-		const float *ea = stage_vertex(m->stage, e / 3, (int)(e % 3));
-		const float *eb =
-		        stage_vertex(m->stage, e / 3, (int)(e % 3) + 1);
-		if (same_point(ea, a) && same_point(eb, b))
-			return &m->slot[i];
-	}
-}
-
-static rad_status edge_map_build(edge_map *m, rad_mem *mem, const float *stage,
-                                 uint32_t ntri)
-{
-	uint32_t cap = 16; /* load factor <= 3/4 */
-	while (cap < 4u * ntri)
-		cap *= 2;
-	m->stage = stage;
-	m->mask = cap - 1;
-	m->slot = rad_mem_alloc(mem, RAD_MEM_SCRATCH, (size_t)cap * 4);
-	if (!m->slot)
-		return RAD_ERR_NOMEM;
-	memset(m->slot, 0xff, (size_t)cap * 4);
-	for (uint32_t t = 0; t < ntri; t++) {
-		for (int k = 0; k < 3; k++) {
-			uint32_t *slot =
-			        edge_probe(m, stage_vertex(stage, t, k),
-			                   stage_vertex(stage, t, k + 1));
-			/* A repeated directed edge (non-manifold or
-			 * duplicate geometry): the first keeps it. */
-			if (*slot == RAD_NONE)
-				*slot = t * 3 + (uint32_t)k;
-		}
-	}
-	return RAD_OK;
-}
-
-/*
- * Can triangle t, seen as (a, b, c) with b -> c its edge k and a the
- * opposite corner, pair with u, which holds c -> b with opposite corner d, into
- * the parallelogram a, b, d, c?  Closure d = b + c - a is checked relative to
- * the longest edge, plus the rounding the staged floats carry.
- */
-static int forms_parallelogram(const rad_scene *s, uint32_t t, int k,
-                               uint32_t u, int j)
-{
-	const rad_poly *pt = &s->polys[t], *pu = &s->polys[u];
-	if (pt->mat != pu->mat || pt->node != pu->node)
-		return 0;
-	if (v3_dot(v3_f(pt->n), v3_f(pu->n)) < 1.0 - MERGE_COPLANAR)
-		return 0;
-	v3 a = v3_f(stage_vertex(s->stage, t, k + 2));
-	v3 b = v3_f(stage_vertex(s->stage, t, k));
-	v3 c = v3_f(stage_vertex(s->stage, t, k + 1));
-	v3 d = v3_f(stage_vertex(s->stage, u, j + 2));
-	double lmax = fmax(v3_len(v3_sub(b, a)), v3_len(v3_sub(c, a)));
-	double cmax = 0;
-	const v3 pts[4] = {a, b, c, d};
-	for (int i = 0; i < 4; i++)
-		cmax = fmax(cmax, fmax(fabs(pts[i].x),
-		                       fmax(fabs(pts[i].y), fabs(pts[i].z))));
-	double tol = MERGE_CLOSE_REL * lmax + 4.0 * FLT_EPSILON * cmax;
-	v3 gap = v3_sub(d, v3_sub(v3_add(b, c), a));
-	return v3_len(gap) <= tol;
-}
-
-/* Rewrite triangle t as the parallelogram with corner a (opposite edge k). */
-static void make_quad(rad_scene *s, uint32_t t, int k)
-{
-	rad_poly *p = &s->polys[t];
-	v3 a = v3_f(stage_vertex(s->stage, t, k + 2));
-	v3 e1 = v3_sub(v3_f(stage_vertex(s->stage, t, k)), a);
-	v3 e2 = v3_sub(v3_f(stage_vertex(s->stage, t, k + 1)), a);
-	v3_store_f(p->p0, a);
-	v3_store_f(p->e1, e1);
-	v3_store_f(p->e2, e2);
-	p->area = (float)v3_len(v3_cross(v3_f(p->e1), v3_f(p->e2)));
-	p->quad = 1;
-}
-
-/* Edges of t, longest first: the diagonal of a cell is tried first. */
-static void edges_by_length(const float *stage, uint32_t t, int order[3])
-{
-	double len[3];
-	for (int k = 0; k < 3; k++) {
-		order[k] = k;
-		len[k] = v3_len(v3_sub(v3_f(stage_vertex(stage, t, k + 1)),
-		                       v3_f(stage_vertex(stage, t, k))));
-	}
-	for (int i = 1; i < 3; i++)
-		for (int j = i; j > 0 && len[order[j]] > len[order[j - 1]];
-		     j--) {
-			int tmp = order[j];
-			order[j] = order[j - 1];
-			order[j - 1] = tmp;
-		}
-}
-
-/* What merging made of each triangle. */
-enum { PAIR_NONE, PAIR_QUAD, PAIR_ABSORBED, PAIR_DUPLICATE };
-
-/*
- * 1 if triangle t repeats an earlier one: the same three vertices in the
- * same turn (so facing the same way).  Such copies are one surface to
- * every renderer but were two to the solvers, each receiving and sending
- * in full.  Half the hospital room's triangles are copies, its bedside
- * bulbs among them, which sent their light twice.  The reversed twin of a
- * two-sided face is not a copy and stays.  The edge map holds the first
- * owner of each directed edge, so a copy finds its original through one of
- * its edges, unless other triangles own all three first (then it stays).
- */
-static int duplicate_of_earlier(const rad_scene *s, const edge_map *m,
-                                uint32_t t)
-{
-	for (int k = 0; k < 3; k++) {
-		uint32_t e = *edge_probe(m, stage_vertex(s->stage, t, k),
-		                         stage_vertex(s->stage, t, k + 1));
-		uint32_t u = e / 3;
-		if (e == RAD_NONE || u >= t)
-			continue;
-		int du = (int)(e % 3) - k, same = 1;
-		for (int i = 0; i < 3; i++)
-			same &= same_point(
-			        stage_vertex(s->stage, t, i),
-			        stage_vertex(s->stage, u, i + du + 3));
-		if (same)
-			return 1;
-	}
-	return 0;
-}
-
-/* Pair t with its first mergeable free neighbour. */
-static void pair_triangle(rad_scene *s, const edge_map *m, uint8_t *pair,
-                          uint32_t t)
-{
-	int order[3];
-	edges_by_length(s->stage, t, order);
-	for (int i = 0; i < 3; i++) {
-		int k = order[i];
-		uint32_t e = *edge_probe(m, stage_vertex(s->stage, t, k + 1),
-		                         stage_vertex(s->stage, t, k));
-		if (e == RAD_NONE || e / 3 == t || pair[e / 3] != PAIR_NONE)
-			continue;
-		uint32_t u = e / 3;
-		if (!forms_parallelogram(s, t, k, u, (int)(e % 3)))
-			continue;
-		make_quad(s, t, k);
-		pair[t] = PAIR_QUAD;
-		pair[u] = PAIR_ABSORBED;
-		return;
-	}
-}
-
-static rad_status merge_quads(rad_scene *s, rad_error *err)
-{
-	edge_map m;
-	uint8_t *pair = rad_mem_calloc(&s->mem, RAD_MEM_SCRATCH, s->npolys, 1);
-	if (!pair || edge_map_build(&m, &s->mem, s->stage, s->npolys)) {
-		rad_mem_free(&s->mem, RAD_MEM_SCRATCH, pair);
-		return rad_fail(err, RAD_ERR_NOMEM,
-		                "commit: out of memory "
-		                "merging %u triangles",
-		                s->npolys);
-	}
-	for (uint32_t t = 0; t < s->npolys; t++)
-		if (duplicate_of_earlier(s, &m, t)) {
-			pair[t] = PAIR_DUPLICATE;
-			s->counts.triangles_duplicate++;
-		}
-	for (uint32_t t = 0; t < s->npolys; t++)
-		if (pair[t] == PAIR_NONE)
-			pair_triangle(s, &m, pair, t);
-	uint32_t n = 0;
-	for (uint32_t t = 0; t < s->npolys; t++)
-		if (pair[t] == PAIR_NONE || pair[t] == PAIR_QUAD)
-			s->polys[n++] = s->polys[t];
-	s->npolys = n;
-	rad_mem_free(&s->mem, RAD_MEM_SCRATCH, m.slot);
-	rad_mem_free(&s->mem, RAD_MEM_SCRATCH, pair);
-	rad_mem_free(&s->mem, RAD_MEM_GEOMETRY, s->stage);
-	s->stage = NULL;
-	rad_scene_fit_polys(s);
-	return RAD_OK;
-}
-
-/* -------------------------------------------------------- bounds and flux */
-
-static void grow_bounds(rad_scene *s, v3 p)
-{
-	const double c[3] = {p.x, p.y, p.z};
-	for (int i = 0; i < 3; i++) {
-		s->lo[i] = fmin(s->lo[i], c[i]);
-		s->hi[i] = fmax(s->hi[i], c[i]);
-	}
-}
-
-static void compute_bounds(rad_scene *s)
-{
-	for (int i = 0; i < 3; i++) {
-		s->lo[i] = INFINITY;
-		s->hi[i] = -INFINITY;
-	}
-	for (uint32_t i = 0; i < s->npolys; i++) {
-		v3 v[4];
-		int nv = rad_poly_corners(&s->polys[i], v);
-		for (int k = 0; k < nv; k++)
-			grow_bounds(s, v[k]);
-	}
-	for (uint32_t i = 0; i < s->nlights; i++)
-		if (s->lights[i].kind != RAD_LIGHT_DIRECTIONAL)
-			grow_bounds(s, v3_d(s->lights[i].pos));
-	s->diag = v3_len(v3_sub(v3_d(s->hi), v3_d(s->lo)));
-	/* Polygons have positive area, so diag > 0; a fallback keeps the
-	 * "diag > 0" promise of scene.h even against float underflow. */
-	if (!(s->diag > 0))
-		s->diag = 1.0;
-}
-
-/*
- * Flux (lm) of one light, per unit intensity.  Used only to scale
- * refinement thresholds, so the range window is ignored (an upper bound).
- * Spot: 2 pi int I(mu) dmu over the cone, exact for glTF's quadratic
- * falloff: (1 - ci) + (ci - co) / 3.  Directional: the scene's bounding
- * box intercepts E x its projected area |d.x| Ly Lz + |d.y| Lx Lz + ...
- */
-static double light_flux_per_unit(const rad_scene *s, const rad_light *L)
-{
-	switch (L->kind) {
-	case RAD_LIGHT_POINT:
-		return 4.0 * M_PI;
-	case RAD_LIGHT_SPOT:
-		return 2.0 * M_PI *
-		       ((1.0 - L->cos_inner) +
-		        (L->cos_inner - L->cos_outer) / 3.0);
-	case RAD_LIGHT_DIRECTIONAL:
-		break;
-	}
-	double ext[3];
-	for (int i = 0; i < 3; i++)
-		ext[i] = s->hi[i] - s->lo[i];
-	return fabs(L->dir[0]) * ext[1] * ext[2] +
-	       fabs(L->dir[1]) * ext[0] * ext[2] +
-	       fabs(L->dir[2]) * ext[0] * ext[1];
-}
-
-static void compute_totals(rad_scene *s)
-{
-	s->total_area = 0;
-	s->counts.emitters = 0;
-	s->counts.quads = 0;
-	for (int c = 0; c < 3; c++)
-		s->total_flux[c] = 0;
-	for (uint32_t i = 0; i < s->npolys; i++) {
-		const rad_poly *p = &s->polys[i];
-		const rad_material *m = &s->mats[p->mat];
-		s->total_area += p->area;
-		s->counts.quads += p->quad;
-		s->counts.emitters += rad_material_emits(m);
-		for (int c = 0; c < 3; c++)
-			s->total_flux[c] += (double)p->area * m->emit[c];
-	}
-	for (uint32_t i = 0; i < s->nlights; i++) {
-		const rad_light *L = &s->lights[i];
-		double k = light_flux_per_unit(s, L);
-		for (int c = 0; c < 3; c++)
-			s->total_flux[c] += k * L->intensity[c];
-	}
-	s->counts.polygons = s->npolys;
-}
-
-rad_status rad_scene_commit(rad_scene *s, rad_error *err)
-{
-	rad_status st = check_open(s, "commit", err);
-	if (st)
-		return st;
-	if (s->npolys == 0)
-		return rad_fail(err, RAD_ERR_INVALID,
-		                "scene has no polygons (%u triangles offered, "
-		                "%u non-finite, %u degenerate)",
-		                s->counts.triangles_in,
-		                s->counts.triangles_nonfinite,
-		                s->counts.triangles_degenerate);
-	if (s->stage && (st = merge_quads(s, err)))
-		return st;
-	compute_bounds(s);
-	if ((st = rad_scene_conform(s, err)))
-		return st;
-	compute_totals(s);
-	if ((st = rad_vis_build(s, err)))
-		return st;
-	s->committed = 1;
-	rad_error_clear(err);
-	return RAD_OK;
-}
-
 /* ----------------------------------------------------------------- query */
 
 void rad_scene_counts_get(const rad_scene *s, rad_scene_counts *out)
@@ -731,21 +384,4 @@ void rad_scene_bounds(const rad_scene *s, double lo[3], double hi[3])
 {
 	memcpy(lo, s->lo, sizeof(s->lo));
 	memcpy(hi, s->hi, sizeof(s->hi));
-}
-
-void rad_scene_free(rad_scene *s)
-{
-	if (!s)
-		return;
-	rad_vis_free(s);
-	rad_mem_free(&s->mem, RAD_MEM_GEOMETRY, s->polys);
-	rad_mem_free(&s->mem, RAD_MEM_GEOMETRY, s->stage);
-	rad_mem_free(&s->mem, RAD_MEM_MATERIALS, s->mats);
-	for (uint32_t i = 0; i < s->nlights; i++)
-		rad_mem_free(&s->mem, RAD_MEM_NAMES, s->lights[i].name);
-	rad_mem_free(&s->mem, RAD_MEM_LIGHTS, s->lights);
-	for (uint32_t i = 0; i < s->nnodes; i++)
-		rad_mem_free(&s->mem, RAD_MEM_NAMES, s->nodes[i]);
-	rad_mem_free(&s->mem, RAD_MEM_NAMES, s->nodes);
-	free(s);
 }

@@ -120,6 +120,11 @@ static inline void rad_scene_fit_polys(rad_scene *s)
 	}
 }
 
+/* The scene is not committed yet: RAD_OK, or RAD_ERR_STATE naming what
+ * (scene.c). */
+rad_status rad_scene_check_open(const rad_scene *s, const char *what,
+                                rad_error *err);
+
 /* Cut the large polygons along the lines where other polygons run right
  * across them (conform.c); at commit, after quad merging and bounds. */
 rad_status rad_scene_conform(rad_scene *s, rad_error *err);

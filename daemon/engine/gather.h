@@ -1,10 +1,10 @@
 /*
- * query.h -- what the point query's two files share (query.c walks the
- * hierarchy for a point, query_vis.c settles the visibility of the
- * pieces of source it meets): the state of one point's gather.
+ * gather.h -- the state of one point's final gather, shared by the point
+ * query's two files (query.c walks the hierarchy for a point, query_vis.c
+ * settles the visibility of the pieces of source it meets).
  */
-#ifndef LUXRAD_QUERY_H
-#define LUXRAD_QUERY_H
+#ifndef LUXRAD_GATHER_H
+#define LUXRAD_GATHER_H
 
 #include "ff.h"
 #include "solver.h"
@@ -70,24 +70,5 @@ static inline double query_running(const gather *g)
 {
 	return fmax(g->total, g->floor);
 }
-
-/* Quarter a patch the way the quadtree does (the middle triangle of a
- * triangle points the other way but keeps the normal). */
-void query_patch_quarters(const rad_patch *p, rad_patch q[4]);
-/* Longest extent of a patch (its longest edge or diagonal). */
-double query_patch_size(const rad_patch *p);
-
-/*
- * Visible kernel of a piece of source of radiosity weight w (the top of a
- * source: a leaf, an element taken whole, an emitter), exact kernel F:
- * five rays now, fewer where memo (siblings in one quadtree, an emitter
- * and its root element; may be NULL) already has its corners.  A piece
- * they leave unsure waits in the point's heap for query_refine_pieces.
- */
-double query_visible_ff(gather *g, const rad_patch *s, double F, double w,
-                        ray_memo *memo);
-/* Once the point's total is known: settle the unsure pieces, correcting
- * the total, and add what is left of their errors to errvis. */
-void query_refine_pieces(gather *g);
 
 #endif
