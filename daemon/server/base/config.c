@@ -36,12 +36,12 @@
  *   5. none: data_dir stays "" and srv_config_check asks for one.
  */
 #include "config.h"
+#include "config_int.h"
 #include "rad.h"
 #include "rp.h"
 #include "textutil.h"
 
 #include <errno.h>
-#include <getopt.h>
 #include <math.h>
 #include <pwd.h>
 #include <stdarg.h>
@@ -52,37 +52,11 @@
 #include <sys/un.h>
 #include <unistd.h>
 
-#define LUXRADD_VERSION "0.1.0"
 #define SOCK_NAME "luxradd.sock"
 #define KiB ((uint64_t)1 << 10)
 #define MiB ((uint64_t)1 << 20)
 #define GiB ((uint64_t)1 << 30)
 #define TiB ((uint64_t)1 << 40)
-#define MAX_LINE 8192 /* longest config-file line accepted */
-
-typedef enum key_type {
-	K_TCP,     /* host:port, or "none" / "" = off (char array) */
-	K_UNIX,    /* socket path, or "none" / "" = off (char array) */
-	K_DIR,     /* directory path, required (char array) */
-	K_FILE,    /* file path, or "none" / "" = none (char array) */
-	K_BOOL,    /* int 0/1 */
-	K_INT,     /* int within [lo, hi] */
-	K_SIZE,    /* size_t bytes within [lo, hi], K/M/G/T suffixes */
-	K_SECONDS, /* double seconds within [lo, hi], s/m/h suffixes */
-	K_REAL,    /* double within [lo, hi] */
-	K_LEVEL,   /* srv_log_level */
-	K_MODBUS,  /* a modbus_* key: parsed and printed by mb_config_* */
-} key_type;
-
-typedef struct cfg_key {
-	const char *name;    /* file key; the flag is --name with '-' for '_' */
-	key_type type;       /* how the value is parsed */
-	size_t off, size;    /* the field in srv_config, its sizeof */
-	double lo, hi;       /* accepted range (numbers) */
-	const char *metavar; /* for --help */
-	const char *example; /* a value worth showing */
-	const char *help;    /* one line */
-} cfg_key;
 
 #define F(field) offsetof(srv_config, field), sizeof(((srv_config *)0)->field)
 
@@ -149,6 +123,13 @@ static const cfg_key keys[] = {
 };
 
 #define NKEYS (sizeof(keys) / sizeof(keys[0]))
+_Static_assert(NKEYS <= CFG_MAX_KEYS, "raise CFG_MAX_KEYS");
+
+const cfg_key *cfg_keys(size_t *n)
+{
+	*n = NKEYS;
+	return keys;
+}
 
 static const char *const level_names[] = {"error", "warn", "info", "debug"};
 
@@ -297,8 +278,8 @@ static int parse_size(const char *v, uint64_t *out)
 }
 
 /* Store path v (absolute, or made absolute) into dst[size]. */
-static int set_path(char *dst, size_t size, const char *v, char *msg,
-                    size_t msglen)
+int cfg_set_path(char *dst, size_t size, const char *v, char *msg,
+                 size_t msglen)
 {
 	char cwd[4096];
 	if (v[0] == '/') {
@@ -375,8 +356,8 @@ static int set_number(srv_config *c, const cfg_key *k, const char *v, char *msg,
 	return 0;
 }
 
-static int set_value(srv_config *c, const cfg_key *k, const char *v, char *msg,
-                     size_t msglen)
+int cfg_set_value(srv_config *c, const cfg_key *k, const char *v, char *msg,
+                  size_t msglen)
 {
 	char *p = (char *)c + k->off;
 	rp_addr a;
@@ -395,16 +376,16 @@ static int set_value(srv_config *c, const cfg_key *k, const char *v, char *msg,
 		c->listen_unix_set = 1;
 		if (is_none(v))
 			return p[0] = '\0', 0;
-		return set_path(p, k->size, v, msg, msglen);
+		return cfg_set_path(p, k->size, v, msg, msglen);
 	case K_FILE:
 		if (is_none(v))
 			return p[0] = '\0', 0;
-		return set_path(p, k->size, v, msg, msglen);
+		return cfg_set_path(p, k->size, v, msg, msglen);
 	case K_DIR:
 		if (is_none(v))
 			return srv_fail(msg, msglen,
 			                "a data directory is required");
-		if (set_path(p, k->size, v, msg, msglen) < 0)
+		if (cfg_set_path(p, k->size, v, msg, msglen) < 0)
 			return -1;
 		if (!c->listen_unix_set &&
 		    join_path(c->listen_unix, sizeof(c->listen_unix), p,
@@ -438,7 +419,7 @@ static int set_value(srv_config *c, const cfg_key *k, const char *v, char *msg,
 }
 
 /* The key named name (underscores or dashes), or NULL. */
-static const cfg_key *find_key(const char *name, size_t len)
+const cfg_key *cfg_find_key(const char *name, size_t len)
 {
 	for (size_t i = 0; i < NKEYS; i++) {
 		const char *k = keys[i].name;
@@ -452,129 +433,6 @@ static const cfg_key *find_key(const char *name, size_t len)
 			return &keys[i];
 	}
 	return NULL;
-}
-
-/* ------------------------------------------------------------- the file */
-
-/*
- * Split one line into key and value (both NUL-terminated in place).
- * Returns 1 for a setting, 0 for a blank or comment line, -1 on a syntax
- * error (msg filled).
- */
-static int split_line(char *line, char **key, size_t *keylen, char **val,
-                      char *msg, size_t msglen)
-{
-	char *s = line, *e;
-	while (*s == ' ' || *s == '\t')
-		s++;
-	if (*s == '\0' || *s == '#')
-		return 0;
-	*key = s;
-	while (*s == '_' || *s == '-' || (*s >= 'a' && *s <= 'z') ||
-	       (*s >= 'A' && *s <= 'Z') || (*s >= '0' && *s <= '9'))
-		s++;
-	*keylen = (size_t)(s - *key);
-	while (*s == ' ' || *s == '\t')
-		s++;
-	if (*keylen == 0 || *s != '=')
-		return srv_fail(msg, msglen, "expected 'key = value'");
-	s++;
-	while (*s == ' ' || *s == '\t')
-		s++;
-	if (*s == '"' || *s == '\'') {
-		char q = *s++;
-		e = strchr(s, q);
-		if (!e)
-			return srv_fail(msg, msglen, "unterminated %c quote",
-			                q);
-		*e++ = '\0';
-		*val = s;
-		while (*e == ' ' || *e == '\t')
-			e++;
-		if (*e && *e != '#')
-			return srv_fail(
-			        msg, msglen,
-			        "unexpected text after the closing quote");
-		return 1;
-	}
-	*val = s;
-	for (e = s; *e; e++) /* a comment starts at '#' after a blank */
-		if (*e == '#' && (e == s || e[-1] == ' ' || e[-1] == '\t'))
-			break;
-	*e = '\0';
-	while (e > s && (e[-1] == ' ' || e[-1] == '\t'))
-		*--e = '\0';
-	return 1;
-}
-
-static int load_line(srv_config *c, char *line, const char *path,
-                     unsigned lineno, char *msg, size_t msglen)
-{
-	char *key = NULL, *val = NULL, why[600];
-	size_t keylen;
-	int r = split_line(line, &key, &keylen, &val, why, sizeof(why));
-	if (r <= 0) {
-		if (r < 0)
-			srv_fail(msg, msglen, "%s:%u: %s", path, lineno, why);
-		return r;
-	}
-	const cfg_key *k = find_key(key, keylen);
-	if (!k) {
-		srv_fail(msg, msglen, "%s:%u: unknown key '%.*s'", path, lineno,
-		         (int)(keylen > 100 ? 100 : keylen), key);
-		return -1;
-	}
-	if (set_value(c, k, val, why, sizeof(why)) < 0) {
-		srv_fail(msg, msglen, "%s:%u: %s: %s", path, lineno, k->name,
-		         why);
-		return -1;
-	}
-	return 0;
-}
-
-int srv_config_load_file(srv_config *c, const char *path, int must_exist,
-                         char *msg, size_t msglen)
-{
-	FILE *f = fopen(path, "r");
-	if (!f) {
-		if (errno == ENOENT && !must_exist)
-			return 0;
-		srv_fail(msg, msglen, "%s: cannot open config file: %s", path,
-		         strerror(errno));
-		return -1;
-	}
-	char *line = NULL;
-	size_t cap = 0;
-	ssize_t n;
-	unsigned lineno = 0;
-	int rc = 0;
-	while (rc == 0 && (n = getline(&line, &cap, f)) >= 0) {
-		lineno++;
-		if (n > MAX_LINE) {
-			srv_fail(msg, msglen,
-			         "%s:%u: line longer than %d bytes", path,
-			         lineno, MAX_LINE);
-			rc = -1;
-		} else if ((size_t)n != strlen(line)) {
-			srv_fail(msg, msglen,
-			         "%s:%u: NUL byte (not a text file?)", path,
-			         lineno);
-			rc = -1;
-		} else {
-			line[strcspn(line, "\r\n")] = '\0';
-			rc = load_line(c, line, path, lineno, msg, msglen) < 0
-			             ? -1
-			             : 0;
-		}
-	}
-	if (rc == 0 && ferror(f)) {
-		srv_fail(msg, msglen, "%s: read error: %s", path,
-		         strerror(errno));
-		rc = -1;
-	}
-	free(line);
-	fclose(f);
-	return rc;
 }
 
 /* ----------------------------------------------------- cross-key checks */
@@ -622,8 +480,7 @@ static void fmt_double(char *buf, size_t len, double x)
 	}
 }
 
-static void fmt_value(const srv_config *c, const cfg_key *k, char *buf,
-                      size_t len)
+void cfg_fmt_value(const srv_config *c, const cfg_key *k, char *buf, size_t len)
 {
 	const char *p = (const char *)c + k->off;
 	switch (k->type) {
@@ -687,150 +544,8 @@ void srv_config_dump(const srv_config *c,
 	         c->config_file[0] ? c->config_file : "none");
 	line(ud, text);
 	for (size_t i = 0; i < NKEYS; i++) {
-		fmt_value(c, &keys[i], val, sizeof(val));
+		cfg_fmt_value(c, &keys[i], val, sizeof(val));
 		snprintf(text, sizeof(text), "%s = %s", keys[i].name, val);
 		line(ud, text);
 	}
-}
-
-void srv_config_usage(const char *argv0)
-{
-	srv_config d;
-	char lhs[64], def[4200], flag[48];
-	srv_config_default(&d);
-	printf("Usage: %s [--config FILE] [OPTIONS]\n\n"
-	       "luxradd, the luxrad radiosity daemon: stores scenes, solves "
-	       "them in\nbackground jobs and answers illuminance queries over "
-	       "TCP and a Unix\nsocket.\n\n"
-	       "  -c, --config FILE        read FILE first (key = value "
-	       "lines); flags win\n"
-	       "  -h, --help               show this help\n"
-	       "  -V, --version            print the version\n\n"
-	       "Every option below is also a config-file key: --listen-tcp X "
-	       "is\nlisten_tcp = X.  Boolean flags alone mean yes; give a "
-	       "value as\n--require-token=no.\n\n",
-	       argv0 && argv0[0] ? argv0 : "luxradd");
-	for (size_t i = 0; i < NKEYS; i++) {
-		const cfg_key *k = &keys[i];
-		size_t j;
-		for (j = 0; k->name[j] && j + 1 < sizeof(flag); j++)
-			flag[j] = k->name[j] == '_' ? '-' : k->name[j];
-		flag[j] = '\0';
-		snprintf(lhs, sizeof(lhs), "--%s %s", flag, k->metavar);
-		fmt_value(&d, k, def, sizeof(def));
-		printf("  %s\n      %s\n      default: %s; e.g. --%s%s%s\n",
-		       lhs, k->help, def, flag, k->type == K_BOOL ? "=" : " ",
-		       k->example);
-	}
-	printf("\nExamples:\n"
-	       "  luxradd --config /etc/luxradd/luxradd.conf\n"
-	       "  luxradd --data-dir /tmp/lx --listen-tcp none --workers 4\n"
-	       "  luxradd --listen-tcp 0.0.0.0:7420 --token-file "
-	       "/etc/luxradd/token\n");
-}
-
-/* ----------------------------------------------------------------- argv */
-
-enum { OPT_CONFIG = 'c', OPT_HELP = 'h', OPT_VERSION = 'V', OPT_KEY = 256 };
-
-static void build_longopts(struct option *lo, char names[][48])
-{
-	size_t i;
-	for (i = 0; i < NKEYS; i++) {
-		size_t j;
-		for (j = 0; keys[i].name[j] && j + 1 < 48; j++)
-			names[i][j] =
-			        keys[i].name[j] == '_' ? '-' : keys[i].name[j];
-		names[i][j] = '\0';
-		lo[i] = (struct option){names[i],
-		                        keys[i].type == K_BOOL
-		                                ? optional_argument
-		                                : required_argument,
-		                        NULL, OPT_KEY + (int)i};
-	}
-	lo[i++] =
-	        (struct option){"config", required_argument, NULL, OPT_CONFIG};
-	lo[i++] = (struct option){"help", no_argument, NULL, OPT_HELP};
-	lo[i++] = (struct option){"version", no_argument, NULL, OPT_VERSION};
-	lo[i] = (struct option){NULL, 0, NULL, 0};
-}
-
-/* Describe getopt's complaint about argv[optind - 1]. */
-static void getopt_error(int r, int argc, char **argv, char *msg, size_t msglen)
-{
-	const char *arg =
-	        optind >= 1 && optind - 1 < argc ? argv[optind - 1] : "?";
-	if (r == ':')
-		srv_fail(msg, msglen, "option '%s' needs a value", arg);
-	else if (optopt && strncmp(arg, "--", 2) != 0)
-		srv_fail(msg, msglen, "unknown option '-%c'", optopt);
-	else
-		srv_fail(msg, msglen, "unknown or ambiguous option '%s'", arg);
-}
-
-/*
- * One pass over argv.  Pass 0 handles --help, --version and --config;
- * pass 1 applies every other flag.  Returns 0, 1 (help/version printed)
- * or -1.
- */
-static int args_pass(srv_config *c, int pass, int argc, char **argv,
-                     const struct option *lo, char *msg, size_t msglen)
-{
-	int r;
-	optind = 0; /* glibc: full re-initialisation */
-	opterr = 0;
-	while ((r = getopt_long(argc, argv, ":c:hV", lo, NULL)) != -1) {
-		if (r == '?' || r == ':') {
-			getopt_error(r, argc, argv, msg, msglen);
-			return -1;
-		}
-		if (pass == 0 && r == OPT_HELP) {
-			srv_config_usage(argv[0]);
-			return 1;
-		}
-		if (pass == 0 && r == OPT_VERSION) {
-			printf("luxradd " LUXRADD_VERSION "\n");
-			return 1;
-		}
-		if (pass == 0 && r == OPT_CONFIG) {
-			if (set_path(c->config_file, sizeof(c->config_file),
-			             optarg, msg, msglen) < 0)
-				return -1;
-			if (srv_config_load_file(c, c->config_file, 1, msg,
-			                         msglen) < 0)
-				return -1;
-		}
-		if (pass == 1 && r >= OPT_KEY) {
-			const cfg_key *k = &keys[r - OPT_KEY];
-			char why[600];
-			const char *v = optarg ? optarg : "yes";
-			if (set_value(c, k, v, why, sizeof(why)) < 0) {
-				srv_fail(msg, msglen, "--%s: %s",
-				         lo[r - OPT_KEY].name, why);
-				return -1;
-			}
-		}
-	}
-	if (optind < argc) {
-		srv_fail(msg, msglen,
-		         "unexpected argument '%s' (boolean flags take a value "
-		         "as --flag=value)",
-		         argv[optind]);
-		return -1;
-	}
-	return 0;
-}
-
-int srv_config_from_args(srv_config *c, int argc, char **argv, char *msg,
-                         size_t msglen)
-{
-	struct option lo[NKEYS + 4];
-	char names[NKEYS][48];
-	build_longopts(lo, names);
-	for (int pass = 0; pass < 2; pass++) {
-		int r = args_pass(c, pass, argc, argv, lo, msg, msglen);
-		if (r != 0)
-			return r;
-	}
-	return srv_config_check(c, msg, msglen) < 0 ? -1 : 0;
 }
