@@ -26,9 +26,11 @@
 #include <string.h>
 #include <unistd.h>
 
+#include "engine_json.h"
 #include "rad.h"
 #include "rp.h"
 #include "sceneio.h"
+#include "tool.h"
 
 enum { EXIT_OKAY = 0, EXIT_FAIL = 1, EXIT_USAGE = 2 };
 
@@ -288,33 +290,6 @@ typedef struct point_list {
 	size_t n;
 } point_list;
 
-/* Load a points file; malformed lines are usage errors naming file:line. */
-static int load_points(const char *path, point_list *pl)
-{
-	char msg[1024];
-	int rc = rp_points_read(path, &pl->xyz, &pl->n, msg, sizeof(msg));
-	if (rc != 0)
-		fprintf(stderr, PROG ": %s\n", msg);
-	return rc == 0              ? EXIT_OKAY
-	       : rc == RP_CLI_USAGE ? EXIT_USAGE
-	                            : EXIT_FAIL;
-}
-
-static int load_scene(const char *path, rad_scene **sc, sio_info *info,
-                      double *seconds)
-{
-	rad_error err = {0};
-	double t0 = rad_seconds();
-	rad_status st = sio_load_file(path, sc, info, &err);
-	*seconds = rad_seconds() - t0;
-	if (st != RAD_OK) {
-		fprintf(stderr, PROG ": %s: %s: %s\n", path,
-		        rad_status_name(err.code), err.msg);
-		return EXIT_FAIL;
-	}
-	return EXIT_OKAY;
-}
-
 /* ---------------------------------------------------------------- output */
 
 /* Everything the run produced, for the two printers. */
@@ -330,44 +305,10 @@ typedef struct report {
 	int threads; /* resolved: never 0 */
 } report;
 
-static json_t *jreal(double v)
-{
-	return isfinite(v) ? json_real(v) : json_null();
-}
-
-static json_t *json_vec3(const double v[3])
-{
-	json_t *a = json_array();
-	for (int i = 0; i < 3; i++)
-		json_array_append_new(a, jreal(v[i]));
-	return a;
-}
-
-/* clang-format off */
-#define SCENE_COUNTERS(X)                                                      \
-	X(triangles_in) X(triangles_nonfinite) X(triangles_degenerate)         \
-	X(triangles_duplicate) X(polygons) X(polygons_cut) X(quads) X(materials) X(materials_offered) X(lights)       \
-	X(emitters) X(nodes)
-#define GLTF_COUNTERS(X) X(meshes) X(primitives) X(primitives_skipped)
-/* clang-format on */
-
 static json_t *json_scene(const report *r)
 {
-	json_t *o = json_object();
-	rad_scene_counts c;
-	double lo[3], hi[3];
-
-	rad_scene_counts_get(r->scene, &c);
-	rad_scene_bounds(r->scene, lo, hi);
+	json_t *o = tool_scene_json(r->scene, r->info);
 	json_object_set_new(o, "path", json_string(r->a->scene_path));
-	json_object_set_new(o, "bounds_min", json_vec3(lo));
-	json_object_set_new(o, "bounds_max", json_vec3(hi));
-#define SET_(f) json_object_set_new(o, #f, json_integer(c.f));
-	SCENE_COUNTERS(SET_)
-#undef SET_
-#define SET_(f) json_object_set_new(o, #f, json_integer(r->info->f));
-	GLTF_COUNTERS(SET_)
-#undef SET_
 	return o;
 }
 
@@ -383,24 +324,25 @@ static int print_json(const report *r)
 	json_t *n = json_array();
 
 	for (size_t i = 0; i < r->pl->n; i++) {
-		json_array_append_new(lux, jreal(r->lux[i]));
-		json_array_append_new(se, jreal(r->se[i]));
+		json_array_append_new(lux, ej_real(r->lux[i]));
+		json_array_append_new(se, ej_real(r->se[i]));
 		json_array_append_new(n, json_integer((json_int_t)r->paths[i]));
 	}
 	json_object_set_new(j, "illuminance_lux", lux);
 	json_object_set_new(j, "stderr_lux", se);
 	json_object_set_new(j, "samples", n);
-	json_object_set_new(j, "seconds", jreal(r->seconds));
-	json_object_set_new(j, "samples_per_second", jreal(per_second(r)));
+	json_object_set_new(j, "seconds", ej_real(r->seconds));
+	json_object_set_new(j, "samples_per_second", ej_real(per_second(r)));
 	json_object_set_new(j, "threads", json_integer(r->threads));
 	json_object_set_new(j, "seed", json_integer((json_int_t)o->seed));
 	json_object_set_new(j, "target_error",
-	                    o->samples ? json_null() : jreal(o->target_error));
+	                    o->samples ? json_null()
+	                               : ej_real(o->target_error));
 	json_object_set_new(j, "max_samples",
 	                    o->samples
 	                            ? json_null()
 	                            : json_integer((json_int_t)o->max_samples));
-	json_object_set_new(j, "load_seconds", jreal(r->load_seconds));
+	json_object_set_new(j, "load_seconds", ej_real(r->load_seconds));
 	json_object_set_new(j, "scene", json_scene(r));
 
 	int rc =
@@ -516,9 +458,10 @@ int main(int argc, char **argv)
 		print_help(&a);
 		return EXIT_OKAY;
 	}
-	rc = load_points(a.points_path, &pl);
+	rc = tool_points_load(PROG, a.points_path, &pl.xyz, &pl.n);
 	if (rc == EXIT_OKAY)
-		rc = load_scene(a.scene_path, &sc, &info, &load_seconds);
+		rc = tool_scene_load(PROG, a.scene_path, &sc, &info,
+		                     &load_seconds);
 	if (rc == EXIT_OKAY)
 		rc = estimate_and_report(&a, sc, &info, &pl, load_seconds);
 	rad_scene_free(sc);

@@ -33,6 +33,9 @@
 #include "rp.h"
 #include "sceneio.h"
 #include "solve_args.h"
+#include "tool.h"
+
+#define PROG "luxrad-solve"
 
 /* ----------------------------------------------------------------- input */
 
@@ -40,18 +43,6 @@ typedef struct point_list {
 	double *xyz; /* 6 doubles per point: position, normal */
 	size_t n;
 } point_list;
-
-/* Load a points file; malformed lines are usage errors naming file:line. */
-static int load_points(const char *path, point_list *pl)
-{
-	char msg[1024];
-	int rc = rp_points_read(path, &pl->xyz, &pl->n, msg, sizeof(msg));
-	if (rc != 0)
-		fprintf(stderr, "luxrad-solve: %s\n", msg);
-	return rc == 0              ? EXIT_OKAY
-	       : rc == RP_CLI_USAGE ? EXIT_USAGE
-	                            : EXIT_SOLVE;
-}
 
 /* ----------------------------------------------------------------- solve */
 
@@ -130,44 +121,6 @@ static json_t *jint(uint64_t v)
 	return json_integer((json_int_t)v);
 }
 
-/* The scene's counters under their field names (rad.h, gltf.h). */
-/* clang-format off */
-#define SCENE_COUNTERS(X)                                                      \
-	X(triangles_in) X(triangles_nonfinite) X(triangles_degenerate)         \
-	X(triangles_duplicate) X(polygons) X(polygons_cut) X(quads)            \
-	X(materials) X(materials_offered) X(lights) X(emitters) X(nodes)
-#define GLTF_COUNTERS(X)                                                       \
-	X(meshes) X(primitives) X(primitives_skipped) X(textures_ignored)      \
-	X(metallic_materials)
-/* clang-format on */
-
-static json_t *json_vec3(const double v[3])
-{
-	json_t *a = json_array();
-	for (int i = 0; i < 3; i++)
-		json_array_append_new(a, ej_real(v[i]));
-	return a;
-}
-
-static json_t *json_scene(const rad_scene *sc, const rad_scene_counts *c,
-                          const sio_info *g)
-{
-	json_t *o = json_object();
-	double lo[3], hi[3];
-
-	rad_scene_bounds(sc, lo, hi);
-	json_object_set_new(o, "bounds_min", json_vec3(lo));
-	json_object_set_new(o, "bounds_max", json_vec3(hi));
-#define SET_(f) json_object_set_new(o, #f, jint(c->f));
-	SCENE_COUNTERS(SET_)
-#undef SET_
-#define SET_(f) json_object_set_new(o, #f, jint(g->f));
-	GLTF_COUNTERS(SET_)
-#undef SET_
-	json_object_set_new(o, "warnings", json_string(g->warnings));
-	return o;
-}
-
 /* Everything the run produced, gathered for the two printers. */
 typedef struct report {
 	const cli_args *a;
@@ -207,8 +160,7 @@ static int print_json(const report *r)
 	json_object_set_new(o, "converged", json_boolean(r->lg->converged));
 	json_object_set_new(o, "rays_total", jint(r->lg->rays));
 	json_object_set_new(o, "stats", ej_stats(s));
-	json_object_set_new(o, "scene",
-	                    json_scene(r->scene, r->counts, r->info));
+	json_object_set_new(o, "scene", tool_scene_json(r->scene, r->info));
 	json_object_set_new(o, "per_iteration", its);
 
 	int rc =
@@ -303,30 +255,6 @@ static int engine_error(const char *what, const rad_error *err)
 	fprintf(stderr, "luxrad-solve: %s: %s: %s\n", what,
 	        rad_status_name(err->code), err->msg[0] ? err->msg : "failed");
 	return EXIT_SOLVE;
-}
-
-static int load_scene(const char *path, rad_scene **sc, sio_info *info,
-                      double *seconds)
-{
-	unsigned char *bytes = NULL;
-	size_t len = 0;
-	rad_error err = {0};
-	rad_status st = sio_file_read(path, &bytes, &len, &err);
-
-	if (st != RAD_OK) {
-		fprintf(stderr, "luxrad-solve: %s\n", err.msg);
-		return EXIT_SOLVE;
-	}
-	double t0 = rad_seconds();
-	st = sio_load(bytes, len, sc, info, NULL, NULL, &err);
-	*seconds = rad_seconds() - t0;
-	free(bytes);
-	if (st != RAD_OK) {
-		fprintf(stderr, "luxrad-solve: %s: %s: %s\n", path,
-		        rad_status_name(err.code), err.msg);
-		return EXIT_SOLVE;
-	}
-	return EXIT_OKAY;
 }
 
 /* ---------------------------------------------------------------- export */
@@ -498,9 +426,10 @@ int main(int argc, char **argv)
 		return EXIT_OKAY;
 	}
 	if (a.points_path)
-		rc = load_points(a.points_path, &pl);
+		rc = tool_points_load(PROG, a.points_path, &pl.xyz, &pl.n);
 	if (rc == EXIT_OKAY)
-		rc = load_scene(a.scene_path, &sc, &info, &load_seconds);
+		rc = tool_scene_load(PROG, a.scene_path, &sc, &info,
+		                     &load_seconds);
 	if (rc == EXIT_OKAY)
 		rc = solve_and_report(&a, sc, &info, &pl, load_seconds);
 	rad_scene_free(sc);
