@@ -156,6 +156,10 @@ static int engine_set(const rad_option_def *d, const char *value, cli_args *a,
 	} else if (rp_cli_double(value, &v) != 0) {
 		v = NAN; /* refused below, with the range */
 	}
+	/* The second pass starts from what the accuracy gives (cli_parse):
+	 * setting it again would undo the options before it. */
+	if (d == &rad_option_defs[RAD_OPT_accuracy] && a->reparse)
+		return EXIT_OKAY;
 	if (rad_option_set(&a->opt, d, v, NULL) != RAD_OK) {
 		rad_option_range_text(d, rng, sizeof(rng));
 		return rp_cli_fail(
@@ -164,10 +168,6 @@ static int engine_set(const rad_option_def *d, const char *value, cli_args *a,
 		        d->type == RAD_OPT_INT ? "an integer" : "a number",
 		        rng);
 	}
-	/* The second pass starts from what the accuracy gives (cli_parse):
-	 * applying it again would undo the options before it. */
-	if (d == &rad_option_defs[RAD_OPT_accuracy] && !a->reparse)
-		rad_options_accuracy(&a->opt, v, NULL);
 	return EXIT_OKAY;
 }
 

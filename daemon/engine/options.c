@@ -139,6 +139,8 @@ rad_status rad_option_set(rad_options *o, const rad_option_def *d, double v,
 	rad_status st = check_value(d, v, err);
 	if (st != RAD_OK)
 		return st;
+	if (d == &rad_option_defs[RAD_OPT_accuracy])
+		return rad_options_accuracy(o, v, err);
 	char *p = (char *)o + d->offset;
 	if (d->type == RAD_OPT_DOUBLE)
 		*(double *)p = v;

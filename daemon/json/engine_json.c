@@ -147,8 +147,6 @@ static ej_status set_one(rad_options *o, const rad_option_def *d, json_t *v,
 	}
 	if (rad_option_set(o, d, x, &err) != RAD_OK)
 		return fail(EJ_INVALID, msg, len, "%s", err.msg);
-	if (d == &rad_option_defs[RAD_OPT_accuracy])
-		rad_options_accuracy(o, x, NULL);
 	return EJ_OK;
 }
 

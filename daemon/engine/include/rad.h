@@ -388,7 +388,8 @@ double rad_option_get(const rad_options *o, const rad_option_def *d);
  * Set an option from a number after checking it: finite, within the
  * range, whole for INT, 0/1 for BOOL, a choice index for ENUM.
  * RAD_ERR_INVALID names the key and its range: option "eps" must be > 0
- * (got -1).
+ * (got -1).  Setting `accuracy` sets the knobs it governs too
+ * (rad_options_accuracy): set it before the options that override them.
  */
 rad_status rad_option_set(rad_options *o, const rad_option_def *d, double v,
                           rad_error *err);
