@@ -102,15 +102,16 @@ static void markdown(FILE *f)
 /* The Markdown table of <stats>, as PROTOCOL.md must hold it. */
 static void stats_markdown(FILE *f)
 {
-	static const char *const kinds[] = {
-	        [0] = "now", [1] = "last iteration", [2] = "all iterations"};
-	enum { GAUGE, STEP, TOTAL };
+	static const char *const kinds[] = {[RAD_STAT_GAUGE] = "now",
+	                                    [RAD_STAT_STEP] = "last iteration",
+	                                    [RAD_STAT_TOTAL] =
+	                                            "all iterations"};
 	fprintf(f, "| Key | Counts | Unit | Meaning |\n"
 	           "|-----|--------|------|---------|\n");
 #define STAT_ROW_(field, group, key, type, kind, unit, help)                   \
 	fprintf(f, "| `%s%s%s` | %s | %s | %s |\n", group,                     \
-	        group[0] ? "." : "", key, kinds[kind], unit[0] ? unit : "",    \
-	        help);
+	        group[0] ? "." : "", key, kinds[RAD_STAT_##kind],              \
+	        unit[0] ? unit : "", help);
 	RAD_STATS(STAT_ROW_)
 #undef STAT_ROW_
 }

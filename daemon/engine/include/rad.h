@@ -426,6 +426,13 @@ const char *rad_solver_kind_name(rad_solver_kind k);
 
 #define RAD_EHIST_BINS 16
 
+/* The kind column of RAD_STATS, as a consumer pastes it: RAD_STAT_##kind. */
+typedef enum rad_stat_kind {
+	RAD_STAT_GAUGE,
+	RAD_STAT_STEP,
+	RAD_STAT_TOTAL
+} rad_stat_kind;
+
 /*
  * A solver's statistics, declared once: the struct, the one JSON encoding
  * (luxrad-solve --json, job.info, iteration events) and the documentation

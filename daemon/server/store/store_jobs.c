@@ -166,19 +166,29 @@ int srv_store_job_checkpoint(srv_store *st, const srv_job_row *row,
 	return 0;
 }
 
+/* The job's checkpoint file: *has, its size and path; -1 with msg when
+ * the row cannot be read or is missing. */
+static int result_file(srv_store *st, uint64_t id, int *has, uint64_t *size,
+                       char *path, char *msg, size_t msglen)
+{
+	int64_t gen;
+	if (job_result(st, id, has, &gen, size, msg, msglen) <= 0)
+		return -1;
+	store_result_path(st, id, gen, path);
+	return 0;
+}
+
 int srv_store_job_result_read(srv_store *st, uint64_t id, unsigned char **bytes,
                               size_t *len, char *msg, size_t msglen)
 {
 	char path[PATHLEN];
 	int has;
-	int64_t gen;
 	uint64_t size;
-	if (job_result(st, id, &has, &gen, &size, msg, msglen) <= 0)
+	if (result_file(st, id, &has, &size, path, msg, msglen) < 0)
 		return -1;
 	if (!has)
 		return srv_fail(msg, msglen, "job %llu has no checkpoint",
 		                (unsigned long long)id);
-	store_result_path(st, id, gen, path);
 	return store_file_read(path, size, bytes, len, msg, msglen);
 }
 
@@ -186,15 +196,13 @@ int srv_store_job_delete(srv_store *st, uint64_t id, char *msg, size_t msglen)
 {
 	char path[PATHLEN];
 	int has;
-	int64_t gen;
 	uint64_t size;
-	if (job_result(st, id, &has, &gen, &size, msg, msglen) <= 0)
+	if (result_file(st, id, &has, &size, path, msg, msglen) < 0)
 		return -1;
 	sqlite3_stmt *s = store_stmt(st, ST_JOB_DELETE);
 	sqlite3_bind_int64(s, 1, store_sql_id(id));
 	if (store_run(st, s, "job delete", msg, msglen) < 0)
 		return -1;
-	store_result_path(st, id, gen, path);
 	if (has && unlink(path) < 0 && errno != ENOENT)
 		return srv_fail(msg, msglen, "%s: cannot remove: %s", path,
 		                strerror(errno));
