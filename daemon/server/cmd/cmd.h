@@ -144,6 +144,16 @@ void cmd_reply_deferred(cmd_server *d, uint64_t conn_id, json_t *reply);
 /* Same with a pre-encoded frame (buf owned), plus an optional payload. */
 void cmd_reply_deferred_raw(cmd_server *d, uint64_t conn_id, unsigned char *buf,
                             size_t len, unsigned char *payload, size_t plen);
+/*
+ * Run task t (the first member of a malloc'ed struct) on pool for request
+ * r: done() then owes r's connection the reply.  Returns CMD_DEFERRED.
+ */
+cmd_result cmd_req_defer(cmd_req *r, srv_pool *pool, srv_task *t,
+                         void (*run)(srv *s, srv_task *t),
+                         void (*done)(srv *s, srv_task *t));
+/* From a deferred task's done(): send reply (stolen) to the connection
+ * owed it, release the request id, free the task. */
+void cmd_task_reply(srv *s, srv_task *t, json_t *reply);
 /* Look up {job: id} in a request; CMD_ERROR with not_found. */
 srv_job *cmd_req_job(cmd_req *r, int *failed);
 

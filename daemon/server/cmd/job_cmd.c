@@ -44,7 +44,6 @@ static void create_run(srv *s, srv_task *t)
 
 static void create_done(srv *s, srv_task *t)
 {
-	cmd_server *d = cmd_of(s);
 	create_task *c = (create_task *)t;
 	srv_job *j = c->job;
 	json_t *reply;
@@ -74,9 +73,7 @@ static void create_done(srv *s, srv_task *t)
 		        json_string(rad_solver_kind_name(j->opt.solver)));
 		json_object_set_new(reply, "options", srv_job_options_json(j));
 	}
-	cmd_reply_deferred(d, t->conn_id, reply);
-	json_decref(t->id);
-	free(c);
+	cmd_task_reply(s, t, reply);
 }
 
 cmd_result cmd_job_create(cmd_req *r)
@@ -114,14 +111,9 @@ cmd_result cmd_job_create(cmd_req *r)
 	j->opt = o;
 	snprintf(j->name, sizeof(j->name), "%s", name ? name : "");
 	c->job = j;
-	c->t.run = create_run;
-	c->t.done = create_done;
-	c->t.conn_id = r->c->id;
-	c->t.id = json_incref(r->id);
 	sc->njobs++;
 	s->jobs_pending++;
-	srv_pool_submit(&s->store_pool, &c->t);
-	return CMD_DEFERRED;
+	return cmd_req_defer(r, &s->store_pool, &c->t, create_run, create_done);
 }
 
 /* ------------------------------------------------------------- list, info */

@@ -124,10 +124,8 @@ static void persist_run(srv *s, srv_task *t)
 static void persist_done(srv *s, srv_task *t)
 {
 	persist_task *p = (persist_task *)t;
-	cmd_reply_deferred(cmd_of(s), t->conn_id, p->reply);
 	srv_job_unref(s, p->job);
-	json_decref(t->id);
-	free(p);
+	cmd_task_reply(s, t, p->reply);
 }
 
 cmd_result cmd_persist_then_reply(cmd_req *r, srv_job *j, json_t *reply)
@@ -145,12 +143,8 @@ cmd_result cmd_persist_then_reply(cmd_req *r, srv_job *j, json_t *reply)
 	p->job = j;
 	p->reply = reply;
 	p->drop = srv_job_detach_solver(j);
-	p->t.run = persist_run;
-	p->t.done = persist_done;
-	p->t.conn_id = r->c->id;
-	p->t.id = json_incref(r->id);
-	srv_pool_submit(&s->store_pool, &p->t);
-	return CMD_DEFERRED;
+	return cmd_req_defer(r, &s->store_pool, &p->t, persist_run,
+	                     persist_done);
 }
 
 /* ------------------------------------------------------------ job.delete */
@@ -182,9 +176,7 @@ static void delete_done(srv *s, srv_task *t)
 	                                            "%s",
 	                                            dt->msg)
 	                           : rp_reply_ok(t->id);
-	cmd_reply_deferred(cmd_of(s), t->conn_id, reply);
-	json_decref(t->id);
-	free(dt);
+	cmd_task_reply(s, t, reply);
 }
 
 cmd_result cmd_job_delete_then_reply(cmd_req *r, srv_job *j)
@@ -193,10 +185,6 @@ cmd_result cmd_job_delete_then_reply(cmd_req *r, srv_job *j)
 	if (!dt)
 		return cmd_req_fail(r, RP_ERR_NOMEM, "out of memory");
 	dt->job = j;
-	dt->t.run = delete_run;
-	dt->t.done = delete_done;
-	dt->t.conn_id = r->c->id;
-	dt->t.id = json_incref(r->id);
-	srv_pool_submit(&r->s->store_pool, &dt->t);
-	return CMD_DEFERRED;
+	return cmd_req_defer(r, &r->s->store_pool, &dt->t, delete_run,
+	                     delete_done);
 }

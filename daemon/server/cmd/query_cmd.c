@@ -75,15 +75,23 @@ static json_t *values_json(const double *v, size_t n)
 	return arr;
 }
 
-/* lux holds 2 n values: the lux, then their error estimates. */
+/* The query's lux (lux holds 2 n values: the lux, then their error
+ * estimates) and the reply's common members; NULL with err. */
+static json_t *gather_lux(cmd_server *d, query_task *q, double *lux,
+                          rad_error *err)
+{
+	if (srv_query_illuminance(&d->core, q->sol, q->pts, q->n, lux,
+	                          lux + q->n, err) != RAD_OK)
+		return NULL;
+	return reply_base(q);
+}
+
 static json_t *run_points(cmd_server *d, query_task *q, double *lux,
                           rad_error *err)
 {
-	srv *s = &d->core;
-	if (srv_query_illuminance(s, q->sol, q->pts, q->n, lux, lux + q->n,
-	                          err) != RAD_OK)
+	json_t *reply = gather_lux(d, q, lux, err);
+	if (!reply)
 		return NULL;
-	json_t *reply = reply_base(q);
 	json_object_set_new(reply, "lux", values_json(lux, q->n));
 	json_object_set_new(reply, "error_lux", values_json(lux + q->n, q->n));
 	return reply;
@@ -92,11 +100,9 @@ static json_t *run_points(cmd_server *d, query_task *q, double *lux,
 static json_t *run_grid(cmd_server *d, query_task *q, double *lux,
                         rad_error *err)
 {
-	srv *s = &d->core;
-	if (srv_query_illuminance(s, q->sol, q->pts, q->n, lux, lux + q->n,
-	                          err) != RAD_OK)
+	json_t *reply = gather_lux(d, q, lux, err);
+	if (!reply)
 		return NULL;
-	json_t *reply = reply_base(q);
 	double mn = HUGE_VAL, mx = -HUGE_VAL, sum = 0, emax = 0;
 	for (size_t i = 0; i < q->n; i++) {
 		emax = lux[q->n + i] > emax ? lux[q->n + i] : emax;
@@ -307,17 +313,13 @@ static query_task *begin(cmd_req *r, query_kind kind)
 	q->kind = kind;
 	q->job = j->id;
 	q->sol = sol;
-	q->t.run = query_run;
-	q->t.done = query_done;
-	q->t.conn_id = r->c->id;
-	q->t.id = json_incref(r->id);
 	return q;
 }
 
 static cmd_result submit(cmd_req *r, query_task *q)
 {
-	srv_pool_submit(&r->s->query_pool, &q->t);
-	return CMD_DEFERRED;
+	return cmd_req_defer(r, &r->s->query_pool, &q->t, query_run,
+	                     query_done);
 }
 
 static cmd_result abandon(cmd_req *r, query_task *q)

@@ -93,3 +93,22 @@ void cmd_reply_deferred_raw(cmd_server *d, uint64_t conn_id, unsigned char *buf,
 		cmd_conn_send(d, c, payload, plen);
 	cmd_conn_unbusy(d, c);
 }
+
+cmd_result cmd_req_defer(cmd_req *r, srv_pool *pool, srv_task *t,
+                         void (*run)(srv *s, srv_task *t),
+                         void (*done)(srv *s, srv_task *t))
+{
+	t->run = run;
+	t->done = done;
+	t->conn_id = r->c->id;
+	t->id = json_incref(r->id);
+	srv_pool_submit(pool, t);
+	return CMD_DEFERRED;
+}
+
+void cmd_task_reply(srv *s, srv_task *t, json_t *reply)
+{
+	cmd_reply_deferred(cmd_of(s), t->conn_id, reply);
+	json_decref(t->id);
+	free(t);
+}

@@ -61,9 +61,7 @@ static void upload_done(srv *s, srv_task *t)
 	} else {
 		reply = rp_reply_error(t->id, u->code, "%s", u->msg);
 	}
-	cmd_reply_deferred(cmd_of(s), t->conn_id, reply);
-	json_decref(t->id);
-	free(u);
+	cmd_task_reply(s, t, reply);
 }
 
 cmd_result cmd_scene_upload(cmd_req *r)
@@ -98,13 +96,8 @@ cmd_result cmd_scene_upload(cmd_req *r)
 	u->payload = u->buf + in_off + off;
 	u->len = r->payload_len;
 	snprintf(u->name, sizeof(u->name), "%s", name ? name : "");
-	u->t.run = upload_run;
-	u->t.done = upload_done;
-	u->t.conn_id = r->c->id;
-	u->t.id = json_incref(r->id);
 	s->scenes_pending++;
-	srv_pool_submit(&s->store_pool, &u->t);
-	return CMD_DEFERRED;
+	return cmd_req_defer(r, &s->store_pool, &u->t, upload_run, upload_done);
 }
 
 /* ------------------------------------------------------------ list / info */
@@ -186,9 +179,7 @@ static void scene_del_done(srv *s, srv_task *t)
 		        (unsigned long long)dt->scene, dt->msg);
 	else
 		reply = rp_reply_ok(t->id);
-	cmd_reply_deferred(cmd_of(s), t->conn_id, reply);
-	json_decref(t->id);
-	free(dt);
+	cmd_task_reply(s, t, reply);
 }
 
 cmd_result cmd_scene_delete(cmd_req *r)
@@ -209,10 +200,6 @@ cmd_result cmd_scene_delete(cmd_req *r)
 	srv_scene_unregister(s, sc);
 	dt->scene = sc->id;
 	srv_scene_unref(sc);
-	dt->t.run = scene_del_run;
-	dt->t.done = scene_del_done;
-	dt->t.conn_id = r->c->id;
-	dt->t.id = json_incref(r->id);
-	srv_pool_submit(&s->store_pool, &dt->t);
-	return CMD_DEFERRED;
+	return cmd_req_defer(r, &s->store_pool, &dt->t, scene_del_run,
+	                     scene_del_done);
 }

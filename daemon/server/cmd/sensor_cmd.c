@@ -66,9 +66,7 @@ static void sensor_run(srv *s, srv_task *t)
 static void sensor_done(srv *s, srv_task *t)
 {
 	sensor_task *k = (sensor_task *)t;
-	cmd_reply_deferred(cmd_of(s), t->conn_id, k->reply);
-	json_decref(t->id);
-	free(k);
+	cmd_task_reply(s, t, k->reply);
 }
 
 /* Write the sensor's row on the store thread, then send reply. */
@@ -87,12 +85,8 @@ static cmd_result record_sensor(cmd_req *r, uint64_t job, const char *name,
 	snprintf(k->name, sizeof(k->name), "%s", name);
 	memcpy(k->pt, pt, sizeof(k->pt));
 	k->reply = reply;
-	k->t.run = sensor_run;
-	k->t.done = sensor_done;
-	k->t.conn_id = r->c->id;
-	k->t.id = json_incref(r->id);
-	srv_pool_submit(&r->s->store_pool, &k->t);
-	return CMD_DEFERRED;
+	return cmd_req_defer(r, &r->s->store_pool, &k->t, sensor_run,
+	                     sensor_done);
 }
 
 cmd_result cmd_sensor_add(cmd_req *r)
