@@ -205,7 +205,7 @@ static double cli_solve(const char *scene, const bench_args *a,
 	if (points)
 		snprintf(pts, sizeof(pts), "--points '%s'", points);
 	snprintf(cmd, sizeof(cmd),
-	         "'%s/luxrad-solve' '%s' --json --threads %d --converge 1e-3 "
+	         "'%s/luxrad-solve' '%s' --json --threads %d --tol 1e-3 "
 	         "--max-iterations 100 %s %s 2>/dev/null",
 	         LUXRAD_BINARY_DIR, scene, a->threads, eps, pts);
 	char *out = NULL;
@@ -220,7 +220,7 @@ static double cli_solve(const char *scene, const bench_args *a,
 	if (!j)
 		dm_fail("luxrad-solve --json: %s", je.text);
 	double s = dm_num(j, "seconds");
-	*iterations = dm_int(j, "iterations");
+	*iterations = dm_int(dm_get(j, "stats"), "iteration");
 	if (query_s)
 		*query_s = *wall_s - dm_num(j, "load_seconds") - s;
 	json_decref(j);
