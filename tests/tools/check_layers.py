@@ -1,7 +1,7 @@
 #!/usr/bin/python3
 """check_layers.py -- the layers of luxrad, checked on the built objects.
 
-Usage: check_layers.py BUILD_DIR [--graph]
+Usage: check_layers.py BUILD_DIR [--graph] [--partial]
        check_layers.py --self-test
 
 
@@ -11,7 +11,10 @@ fails when
     (an upward call: the layers are listed lowest first), or
   - object files call each other in a loop (a cycle), inside a library or
     across libraries.
-With --graph it also prints the file-to-file edges it found.  The self
+With --graph it also prints the file-to-file edges it found.  With
+--partial, layers not built in BUILD_DIR are skipped (to measure an
+older checkout's build, whose libraries had other names); the sources
+are found through the build's CMakeCache.txt.  The self
 test compiles a few objects with an upward call and a loop in a scratch
 directory and checks that both are found (and nothing in a clean set).
 
@@ -47,11 +50,24 @@ def nm_lines(path):
     return out.splitlines()
 
 
+def source_dir(build):
+    """The source tree BUILD_DIR was configured from (CMakeCache.txt),
+    else the one this script is in."""
+    try:
+        with open(os.path.join(build, "CMakeCache.txt")) as f:
+            for line in f:
+                if line.startswith("CMAKE_HOME_DIRECTORY:"):
+                    return line.split("=", 1)[1].strip()
+    except OSError:
+        pass
+    return os.path.dirname(os.path.dirname(os.path.dirname(
+        os.path.abspath(__file__))))
+
+
 def objects_of_target(build, objdir):
     """The target's object files whose source still exists (a renamed
     source's old object may still lie in the build tree)."""
-    repo = os.path.dirname(os.path.dirname(os.path.dirname(
-        os.path.abspath(__file__))))
+    repo = source_dir(build)
     srcdir = os.path.join(repo, os.path.relpath(
         os.path.dirname(os.path.dirname(objdir)), build))
     found = glob.glob(os.path.join(objdir, "**", "*.o"), recursive=True)
@@ -82,14 +98,20 @@ def objects_of(build, rel):
     return objs
 
 
-def check(build, layers, graph=False, quiet=False):
+def check(build, layers, graph=False, quiet=False, partial=False):
     """The number of problems found (upward uses and cycles)."""
     say = (lambda *a: None) if quiet else print
     layer_of, owner, undefined = {}, collections.defaultdict(set), {}
+    per_layer = collections.Counter()
     for i, (name, rel) in enumerate(layers):
         if not os.path.exists(os.path.join(build, rel)):
+            if partial:
+                say(f"check_layers: no {rel} in {build}: skipped")
+                continue
             raise SystemExit(f"check_layers: {rel} not built in {build}")
-        for obj, (defs, undefs) in objects_of(build, rel).items():
+        objs = objects_of(build, rel)
+        per_layer[name] = len(objs)
+        for obj, (defs, undefs) in objs.items():
             node = f"{name}:{obj}"
             layer_of[node] = i
             undefined[node] = undefs
@@ -146,7 +168,9 @@ def check(build, layers, graph=False, quiet=False):
         say(f"cycle of {len(comp)}: " + "; ".join(ties))
         bad += 1
     nedges = sum(len({t for t, _ in e}) for e in edges.values())
-    say(f"check_layers: {len(layer_of)} objects in {len(layers)} layers, "
+    say("objects per layer: " + ", ".join(
+        f"{n} {per_layer[n]}" for n, _ in layers if n in per_layer))
+    say(f"check_layers: {len(layer_of)} objects in {len(per_layer)} layers, "
         f"{nedges} file-to-file edges, {bad} problem(s)")
     return bad
 
@@ -195,7 +219,8 @@ def main():
         return 2
     if self_test() != 0:
         return 1
-    return 1 if check(sys.argv[1], LAYERS, "--graph" in sys.argv[2:]) else 0
+    return 1 if check(sys.argv[1], LAYERS, "--graph" in sys.argv[2:],
+                      partial="--partial" in sys.argv[2:]) else 0
 
 
 if __name__ == "__main__":
