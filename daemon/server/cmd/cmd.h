@@ -156,6 +156,8 @@ cmd_result cmd_req_defer(cmd_req *r, srv_pool *pool, srv_task *t,
 void cmd_task_reply(srv *s, srv_task *t, json_t *reply);
 /* Look up {job: id} in a request; CMD_ERROR with not_found. */
 srv_job *cmd_req_job(cmd_req *r, int *failed);
+/* Map an engine status to a wire error code (every status has one). */
+rp_err cmd_err_from_rad(rad_status st);
 
 /* dispatch.c: check one decoded frame, run its handler (I/O thread);
  * conn.c calls it through cmd_server.on_frame. */
@@ -182,8 +184,6 @@ cmd_result cmd_query_surfaces(cmd_req *r);
 cmd_result cmd_export(cmd_req *r);
 cmd_result cmd_sensor_add(cmd_req *r);
 cmd_result cmd_sensor_list(cmd_req *r);
-/* Map an engine status to a wire error code. */
-rp_err cmd_err_from_rad(rad_status st);
 
 /* publish.c: subscriptions (an observer of the core). */
 int cmd_subs_start(cmd_server *d);

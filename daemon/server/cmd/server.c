@@ -446,7 +446,7 @@ void cmd_server_shutdown(cmd_server *d, const char *why)
 	srv_info("shutting down (%s): checkpointing jobs", why);
 	d->shutting_down = 1;
 	close_listeners(d);
-	srv_core_quiesce(&d->core); /* asks the workers to stop */
+	srv_workers_stop_request(&d->core);
 }
 
 /*
