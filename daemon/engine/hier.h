@@ -250,6 +250,12 @@ double rad_hier_cover_dist(const rad_hier *h, uint32_t poly);
 rad_status rad_hier_init(rad_hier *h, const rad_scene *s, rad_mem *mem,
                          double min_edge, rad_error *err);
 void rad_hier_destroy(rad_hier *h);
+/*
+ * Check the trees and link lists (hier_check.c): 0, or -1 with msg naming
+ * the first broken invariant.  Run after every step when LUXRAD_CHECKS is
+ * defined (Debug and sanitizer builds).
+ */
+int rad_hier_check(const rad_hier *h, char *msg, size_t len);
 
 /* Longest edge of an element's region, metres. */
 double rad_elem_edge(const rad_elem *e);

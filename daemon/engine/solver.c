@@ -94,6 +94,11 @@ rad_status rad_solver_step(rad_solver *sv, rad_error *err)
 	rad_status st = sv->ops->step(sv, err);
 	if (st)
 		return st;
+#ifdef LUXRAD_CHECKS
+	char why[sizeof(err->msg)];
+	if (rad_hier_check(&sv->h, why, sizeof(why)) != 0)
+		return rad_fail(err, RAD_ERR_STATE, "%s", why);
+#endif
 	sv->stats.iteration++;
 	sv->stats.seconds = rad_seconds() - t0;
 	sv->stats.seconds_total += sv->stats.seconds;

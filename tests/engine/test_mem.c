@@ -14,6 +14,7 @@
 
 #include "mem.h"
 #include "rad.h"
+#include "solver.h"
 
 static int64_t heap_in_use(void)
 {
@@ -195,6 +196,65 @@ static void test_scene_and_solver_return_to_zero(void **state)
 	rad_scene_free(s);
 }
 
+/* Every solver's tree and links keep their invariants, and the check
+ * finds a broken one (a child that disowns its parent, a wrong leaf
+ * count, a link on the wrong list). */
+static void test_hier_invariants(void **state)
+{
+	(void)state;
+	rad_scene *s = make_room();
+	char msg[256];
+	for (int k = RAD_SOLVER_MATRIX; k < RAD_SOLVER_NKINDS; k++) {
+		rad_options o;
+		rad_options_default(&o);
+		o.solver = (rad_solver_kind)k;
+		o.mesh_edge_rel = 0.2;
+		rad_solver *sv = NULL;
+		rad_error err;
+		assert_int_equal(rad_solver_new(s, &o, &sv, &err), RAD_OK);
+		assert_int_equal(rad_solver_step(sv, &err), RAD_OK);
+		assert_int_equal(rad_solver_step(sv, &err), RAD_OK);
+		assert_int_equal(rad_hier_check(&sv->h, msg, sizeof(msg)), 0);
+		if (k == RAD_SOLVER_HR) {
+			rad_hier *h = &sv->h;
+			uint32_t split = RAD_NONE, linked = RAD_NONE;
+			/* Records 0 .. count-1 are live here: nothing was
+			 * released in two steps of hr. */
+			for (uint32_t i = 0; i < h->elems.count; i++) {
+				rad_elem *e = rad_elem_at(h, i);
+				if (e->child != RAD_NONE && split == RAD_NONE)
+					split = i;
+				if (e->links != RAD_NONE && linked == RAD_NONE)
+					linked = i;
+			}
+			assert_true(split != RAD_NONE && linked != RAD_NONE);
+			rad_elem *ch =
+			        rad_elem_at(h, rad_elem_at(h, split)->child);
+			ch->parent ^= 1;
+			assert_int_equal(rad_hier_check(h, msg, sizeof(msg)),
+			                 -1);
+			assert_non_null(strstr(msg, "disowns its parent"));
+			ch->parent ^= 1;
+			h->nleaves++;
+			assert_int_equal(rad_hier_check(h, msg, sizeof(msg)),
+			                 -1);
+			assert_non_null(strstr(msg, "nleaves"));
+			h->nleaves--;
+			rad_link *l =
+			        rad_link_at(h, rad_elem_at(h, linked)->links);
+			l->rcv ^= 1;
+			assert_int_equal(rad_hier_check(h, msg, sizeof(msg)),
+			                 -1);
+			assert_non_null(strstr(msg, "another receiver"));
+			l->rcv ^= 1;
+			assert_int_equal(rad_hier_check(h, msg, sizeof(msg)),
+			                 0);
+		}
+		rad_solver_free(sv);
+	}
+	rad_scene_free(s);
+}
+
 static void test_solver_alloc_failure_is_clean(void **state)
 {
 	(void)state;
@@ -240,6 +300,7 @@ int main(void)
 	        cmocka_unit_test(test_injected_failure_counts_nothing),
 	        cmocka_unit_test(test_scene_and_solver_return_to_zero),
 	        cmocka_unit_test(test_solver_alloc_failure_is_clean),
+	        cmocka_unit_test(test_hier_invariants),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }

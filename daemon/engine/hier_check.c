@@ -1,0 +1,149 @@
+/*
+ * hier_check.c -- the hierarchy's invariants, checked (rad_hier_check).
+ *
+ * Run after every step in the builds that define LUXRAD_CHECKS (Debug
+ * and the sanitizer builds: solver.c); tests may call it at any time.
+ * A broken invariant is a bug of the engine, never of its input, so the
+ * check costs nothing in a release build and in a check build turns a
+ * silent corruption into an error that names the node.
+ *
+ * What holds:
+ *   - elements: each polygon root is element i with no parent; an
+ *     element's four children name it as parent, its polygon, one level
+ *     more, and together cover its area; the leaves counted are nleaves;
+ *   - clusters: the children of a cluster name it as parent and split its
+ *     range of order[] in two, in order, and its area;
+ *   - links: every link on a node's list names that node as receiver, a
+ *     source inside its pool, and a passive link's children lie inside
+ *     the link pool.
+ */
+#include <math.h>
+#include <stdio.h>
+
+#include "hier.h"
+#include "scene.h"
+
+#define AREA_REL 1e-3 /* float sums of up to 4 children, relative */
+
+typedef struct checker {
+	const rad_hier *h;
+	char *msg;
+	size_t len;
+	uint64_t leaves;
+} checker;
+
+static int fail(checker *c, const char *what, uint32_t id)
+{
+	snprintf(c->msg, c->len, "hierarchy invariant broken: %s (node %u)",
+	         what, id);
+	return -1;
+}
+
+static int near_area(double sum, double whole)
+{
+	return fabs(sum - whole) <= AREA_REL * fmax(whole, 1e-30);
+}
+
+static int check_links(checker *c, uint32_t head, uint32_t tagged)
+{
+	const rad_hier *h = c->h;
+	uint64_t seen = 0;
+	for (uint32_t l = head; l != RAD_NONE; l = rad_link_at(h, l)->next) {
+		if (l >= h->links.count || ++seen > h->links.count)
+			return fail(c, "link list leaves the pool or loops",
+			            tagged);
+		const rad_link *k = rad_link_at(h, l);
+		if (k->rcv != tagged)
+			return fail(c,
+			            "link on a node's list names another "
+			            "receiver",
+			            tagged);
+		uint32_t src = k->src & ~RAD_TAG_MASK;
+		if ((k->src & RAD_TAG_CLUSTER) ? src >= h->clusters.count
+		    : (k->src & RAD_TAG_LIGHT) ? src >= h->scene->nlights
+		                               : src >= h->elems.count)
+			return fail(c, "link source outside its pool", tagged);
+		if (k->child != RAD_NONE &&
+		    (uint64_t)k->child + k->nchild > h->links.count)
+			return fail(c,
+			            "passive link's children outside the "
+			            "pool",
+			            tagged);
+	}
+	return 0;
+}
+
+static int check_elem(checker *c, uint32_t id)
+{
+	const rad_hier *h = c->h;
+	const rad_elem *e = rad_elem_at(h, id);
+	if (check_links(c, e->links, id) != 0)
+		return -1;
+	if (e->child == RAD_NONE) {
+		c->leaves++;
+		return 0;
+	}
+	if ((uint64_t)e->child + 4 > h->elems.count)
+		return fail(c, "element's children outside the pool", id);
+	double area = 0;
+	for (uint32_t k = 0; k < 4; k++) {
+		const rad_elem *ch = rad_elem_at(h, e->child + k);
+		if (ch->parent != id || ch->poly != e->poly ||
+		    ch->level != e->level + 1)
+			return fail(c, "child element disowns its parent", id);
+		area += ch->area;
+	}
+	if (!near_area(area, e->area))
+		return fail(c, "children do not cover the element", id);
+	for (uint32_t k = 0; k < 4; k++)
+		if (check_elem(c, e->child + k) != 0)
+			return -1;
+	return 0;
+}
+
+static int check_cluster(checker *c, uint32_t id, unsigned depth)
+{
+	const rad_hier *h = c->h;
+	const rad_cluster *cl = rad_cluster_at(h, id);
+	if (depth > 64)
+		return fail(c, "cluster tree deeper than 64", id);
+	if (check_links(c, cl->links, id | RAD_TAG_CLUSTER) != 0)
+		return -1;
+	if (cl->child == RAD_NONE)
+		return 0;
+	if ((uint64_t)cl->child + 2 > h->clusters.count)
+		return fail(c, "cluster's children outside the pool", id);
+	const rad_cluster *a = rad_cluster_at(h, cl->child);
+	const rad_cluster *b = rad_cluster_at(h, cl->child + 1);
+	if (a->parent != id || b->parent != id)
+		return fail(c, "child cluster disowns its parent", id);
+	if (a->first != cl->first || b->first != a->first + a->count ||
+	    a->count + b->count != cl->count)
+		return fail(c, "child clusters do not split the range", id);
+	if (!near_area((double)a->area + b->area, cl->area))
+		return fail(c, "child clusters do not cover the area", id);
+	if (check_cluster(c, cl->child, depth + 1) != 0)
+		return -1;
+	return check_cluster(c, cl->child + 1, depth + 1);
+}
+
+int rad_hier_check(const rad_hier *h, char *msg, size_t len)
+{
+	checker c = {h, msg, len, 0};
+	uint32_t npolys = h->scene->npolys;
+	if (h->elems.count < npolys)
+		return fail(&c, "fewer elements than polygons", npolys);
+	for (uint32_t i = 0; i < npolys; i++) {
+		const rad_elem *e = rad_elem_at(h, i);
+		if (e->parent != RAD_NONE || e->poly != i || e->level != 0)
+			return fail(&c, "polygon root misplaced", i);
+		if (check_elem(&c, i) != 0)
+			return -1;
+	}
+	if (c.leaves != h->nleaves)
+		return fail(&c, "leaf count differs from nleaves",
+		            (uint32_t)c.leaves);
+	if (h->clusters.count > 0 && check_cluster(&c, 0, 0) != 0)
+		return -1;
+	return 0;
+}
