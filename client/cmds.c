@@ -20,6 +20,7 @@
 #include <unistd.h>
 
 #include "client.h"
+#include "pack.h"
 
 /* ------------------------------------------------------- reply helpers */
 
@@ -98,38 +99,27 @@ int lx_job_options(lx_ctx *cx, json_t *req)
 
 /* -------------------------------------------------------------- submit */
 
-/* Read a whole file; usage error (exit 2) when it cannot be read. */
-static int read_file(lx_ctx *cx, const char *path, unsigned char **out,
-                     size_t *len)
+/*
+ * Read a scene file as it will travel: a GLB as it is, a .gltf packed
+ * into one GLB with the buffers and images beside it (sio_scene_read: the
+ * daemon reads no file).  Usage error (exit 2) when it cannot be read or
+ * packed.
+ */
+static int read_scene(lx_ctx *cx, const char *path, unsigned char **out,
+                      size_t *len)
 {
 	struct stat st;
-	FILE *f = fopen(path, "rb");
-	unsigned char *buf;
-
-	if (!f || fstat(fileno(f), &st) != 0 || !S_ISREG(st.st_mode)) {
-		int e = f ? EISDIR : errno;
-		if (f)
-			fclose(f);
+	rad_error err = {0};
+	int e = stat(path, &st) != 0   ? errno
+	        : !S_ISREG(st.st_mode) ? EISDIR
+	                               : 0;
+	if (e)
 		return lx_usage_error(cx, "cannot read scene file '%s': %s",
 		                      path, strerror(e));
-	}
-	if (st.st_size == 0) {
-		fclose(f);
+	if (st.st_size == 0)
 		return lx_usage_error(cx, "scene file '%s' is empty", path);
-	}
-	buf = malloc((size_t)st.st_size);
-	if (!buf ||
-	    fread(buf, 1, (size_t)st.st_size, f) != (size_t)st.st_size) {
-		int e = errno;
-		free(buf);
-		fclose(f);
-		return lx_usage_error(cx, "cannot read scene file '%s': %s",
-		                      path,
-		                      buf ? strerror(e) : "out of memory");
-	}
-	fclose(f);
-	*out = buf;
-	*len = (size_t)st.st_size;
+	if (sio_scene_read(path, out, len, NULL, &err) != RAD_OK)
+		return lx_usage_error(cx, "%s", err.msg);
 	return 0;
 }
 
@@ -226,7 +216,7 @@ int lx_cmd_submit(lx_ctx *cx)
 		snprintf(name, sizeof name, "%s", cx->val[LX_OPT_NAME]);
 	else
 		base_name(cx->pos[0], name, sizeof name);
-	if ((rc = read_file(cx, cx->pos[0], &data, &len)) == 0 &&
+	if ((rc = read_scene(cx, cx->pos[0], &data, &len)) == 0 &&
 	    (rc = lx_open(cx)) == 0)
 		rc = upload(cx, data, len, name, &scene);
 	free(data);

@@ -15,7 +15,7 @@ int tool_scene_load(const char *prog, const char *path, rad_scene **sc,
 	unsigned char *bytes = NULL;
 	size_t len = 0;
 	rad_error err = {0};
-	rad_status st = sio_file_read(path, &bytes, &len, &err);
+	rad_status st = sio_scene_read(path, &bytes, &len, NULL, &err);
 
 	if (st != RAD_OK) {
 		fprintf(stderr, "%s: %s\n", prog, err.msg);

@@ -16,7 +16,8 @@
 enum { TOOL_OK = 0, TOOL_FAIL = 1, TOOL_USAGE = 2 };
 
 /*
- * Read a glTF/GLB file into a committed scene; *seconds is the time the
+ * Read a GLB, or a .gltf with the files beside it (packed: sio_scene_read),
+ * into a committed scene; *seconds is the time the
  * load took (parse, build, BVH), the file read aside.  TOOL_OK, or
  * TOOL_FAIL after "PROG: why" on stderr.
  */

@@ -175,12 +175,13 @@ rad_status parse_failed(const std::string &msg, const Refusal &r,
 			                "buffer %zu has no uri (only a GLB's "
 			                "first buffer may omit it)",
 			                buf);
-		return rad_fail(err, RAD_ERR_INVALID,
-		                "buffer %zu: external URI '%.80s%s' refused: "
-		                "only data: URIs and the GLB binary chunk are "
-		                "read",
-		                buf, r.path.c_str(),
-		                r.path.size() > 80 ? "..." : "");
+		return rad_fail(
+		        err, RAD_ERR_INVALID,
+		        "buffer %zu: external URI '%.80s%s' refused: a "
+		        "scene sent as bytes carries its buffers (data: "
+		        "URIs or a GLB); luxrad submit and the tools "
+		        "pack a .gltf with the files beside it",
+		        buf, r.path.c_str(), r.path.size() > 80 ? "..." : "");
 	}
 	if (msg.find("Failed to decode 'uri'") != std::string::npos)
 		return rad_fail(err, RAD_ERR_INVALID,

@@ -24,6 +24,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "pack.h"
 #include "rad.h"
 
 #ifdef __cplusplus
@@ -80,15 +81,9 @@ rad_status sio_load(const void *bytes, size_t len, rad_scene **scene,
                     rad_error *err);
 void sio_sensors_free(sio_sensor *s);
 
-/*
- * Read a whole file (scene_file.c): *out is malloc'ed, caller frees with
- * free().  RAD_ERR_IO names the path and the system's reason.  For local
- * tools and tests only: the daemon never reads a path a client names.
- */
-rad_status sio_file_read(const char *path, unsigned char **out, size_t *len,
-                         rad_error *err);
-
-/* sio_file_read() then sio_load() without sensors. */
+/* sio_scene_read() (pack.h: a .gltf packed with the files beside it)
+ * then sio_load() without sensors.  For local tools and tests only: the
+ * daemon never reads a path a client names. */
 rad_status sio_load_file(const char *path, rad_scene **out, sio_info *info,
                          rad_error *err);
 

@@ -226,6 +226,18 @@ if [[ $SCENE_ID =~ ^[0-9]+$ ]]; then pass "submit prints the scene id"; else fai
 run scenes
 expect_out "scenes lists the upload by name" "cornell"
 
+# A Blender export as it lies in its folder (.gltf + .bin + PNG): the
+# client packs it into one GLB, the daemon reads no file.
+BLENDER="$ROOT/../shared/scenes/real/vinc3r-cornellbox/BJS-2.80-Eevee-gltf"
+run submit "$BLENDER/cornellBox-2.80-Eevee-gltf.gltf" --name blender
+expect_exit "submit a .gltf with its .bin and textures beside it" 0
+run --json scenes
+expect_out "the packed Blender export is listed" "blender"
+mkdir -p "$TMP/sep"
+cp "$BLENDER/cornellBox-2.80-Eevee-gltf.gltf" "$TMP/sep/"
+run submit "$TMP/sep/cornellBox-2.80-Eevee-gltf.gltf"
+expect_exit "submit a .gltf whose .bin is missing" 2 "not found beside the scene"
+
 run create "$SCENE_ID" --eps 0.05 --threads 1 --name e2e
 expect_exit "create" 0
 JOB=$(cat "$TMP/out")

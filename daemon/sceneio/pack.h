@@ -1,0 +1,53 @@
+/*
+ * pack.h -- a glTF scene as exporters write it ("glTF Separate": a .gltf
+ * beside its .bin buffers and image files) packed into one GLB in
+ * memory, so that a scene travels as one set of bytes.
+ *
+ * The offline tools load scenes through it, and the client packs before
+ * upload: the daemon itself still reads no file.  A small library of its
+ * own (luxrad_pack: C, jansson, no tinygltf), so the thin client can link
+ * it.
+ */
+#ifndef LUXRAD_SIO_PACK_H
+#define LUXRAD_SIO_PACK_H
+
+#include <stddef.h>
+
+#include "rad.h"
+
+/* What packing did, for the scene's report. */
+typedef struct sio_pack_info {
+	unsigned buffers_read; /* buffers read from files beside the scene */
+	unsigned images_read;  /* images read from files beside the scene */
+	unsigned data_uris;    /* buffers and images decoded from data: URIs */
+} sio_pack_info;
+
+/*
+ * Pack a glTF JSON document (json, len bytes) into a GLB (*glb, malloc'ed,
+ * *glb_len bytes): every buffer becomes part of the one binary chunk,
+ * every image with a uri gets a bufferView there.  URIs are data: URIs or
+ * relative paths read from dir, the scene's folder: no scheme, no
+ * absolute path, no "..", nothing that resolves (symbolic links
+ * followed) outside dir.  info may be NULL.  RAD_ERR_INVALID names the
+ * buffer or image and why; RAD_ERR_IO a file that cannot be read.
+ */
+rad_status sio_pack(const unsigned char *json, size_t len, const char *dir,
+                    unsigned char **glb, size_t *glb_len, sio_pack_info *info,
+                    rad_error *err);
+
+/* A whole file (or pipe) into *out (malloc'ed); RAD_ERR_IO names it. */
+rad_status sio_file_read(const char *path, unsigned char **out, size_t *len,
+                         rad_error *err);
+
+/* 1 if bytes start a GLB (the magic "glTF"). */
+int sio_is_glb(const unsigned char *bytes, size_t len);
+
+/*
+ * A scene file as one set of bytes: a GLB as it is, a .gltf packed with
+ * the files beside it (sio_pack, dir = the file's folder).  *out is
+ * malloc'ed.  info may be NULL.
+ */
+rad_status sio_scene_read(const char *path, unsigned char **out, size_t *len,
+                          sio_pack_info *info, rad_error *err);
+
+#endif
