@@ -94,6 +94,9 @@ def one_run(out, name, solver, acc, ref, sd):
         why = re.sub(r"^[\w-]+: .*?\.(gltf|glb): ", "", why)
         run["status"] = "timeout" if rc == "124" else why
         return run
+    if "stats" not in o:  # written before luxrad-solve's JSON had stats
+        run["status"] = "stale run: rerun validate.sh"
+        return run
     lux, el = o["illuminance_lux"], o["error_lux"]
     st = o["stats"]
     run.update(status="ok", iterations=st["iteration"],
