@@ -16,10 +16,10 @@
 enum { TOOL_OK = 0, TOOL_FAIL = 1, TOOL_USAGE = 2 };
 
 /*
- * Read a GLB, or a .gltf with the files beside it (packed: sio_scene_read),
- * into a committed scene; *seconds is the time the
- * load took (parse, build, BVH), the file read aside.  TOOL_OK, or
- * TOOL_FAIL after "PROG: why" on stderr.
+ * Read a GLB, or a .gltf with the files beside it (packed:
+ * sio_scene_read), into a committed scene; *seconds is the time the load
+ * took (parse, build, BVH), the file read aside.  TOOL_OK, or TOOL_FAIL
+ * after "PROG: why" on stderr.
  */
 int tool_scene_load(const char *prog, const char *path, rad_scene **sc,
                     sio_info *info, double *seconds);

@@ -327,7 +327,8 @@ static rad_status bin_append(packer *pk, const unsigned char *b, size_t n,
 		pk->bin = nb;
 		pk->cap = ncap;
 	}
-	memset(pk->bin + pk->nbin, 0, start - pk->nbin);
+	if (start > pk->nbin)
+		memset(pk->bin + pk->nbin, 0, start - pk->nbin);
 	if (n)
 		memcpy(pk->bin + start, b, n);
 	pk->nbin = start + n;
@@ -519,11 +520,15 @@ rad_status sio_pack(const unsigned char *json, size_t len, const char *dir,
 		return rad_fail(err, RAD_ERR_IO, "scene folder '%s': %s", dir,
 		                strerror(errno));
 	json_t *root = json_loadb((const char *)json, len, 0, &je);
-	if (!json_is_object(root)) {
-		json_decref(root);
+	if (!root)
 		return rad_fail(err, RAD_ERR_INVALID,
 		                "malformed glTF: line %d: %s", je.line,
 		                je.text);
+	if (!json_is_object(root)) {
+		json_decref(root);
+		return rad_fail(err, RAD_ERR_INVALID,
+		                "not a glTF document: the top level is not an "
+		                "object");
 	}
 	json_t *buffers = json_object_get(root, "buffers");
 	size_t nbuffers = json_array_size(buffers);

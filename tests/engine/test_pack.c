@@ -213,6 +213,28 @@ static void test_images_are_packed_png_and_jpeg_only(void **state)
 	assert_non_null(strstr(err.msg, "image 0"));
 }
 
+/* Edge documents: an empty buffer packs (nothing read), a top level that
+ * is not an object is refused by name. */
+static void test_edge_documents(void **state)
+{
+	scratch *s = *state;
+	char doc[4096];
+	unsigned char *glb = NULL;
+	size_t n = 0;
+	rad_error err = {0};
+	snprintf(doc, sizeof(doc), doc_fmt, "missing.bin", 0, "");
+	assert_int_equal(sio_pack((const unsigned char *)doc, strlen(doc),
+	                          s->dir, &glb, &n, NULL, &err),
+	                 RAD_OK);
+	assert_true(sio_is_glb(glb, n));
+	free(glb);
+	assert_int_equal(sio_pack((const unsigned char *)"[]", 2, s->dir, &glb,
+	                          &n, NULL, &err),
+	                 RAD_ERR_INVALID);
+	assert_non_null(strstr(err.msg, "not a glTF document"));
+	assert_null(glb);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -225,6 +247,8 @@ int main(void)
 	        cmocka_unit_test_setup_teardown(
 	                test_images_are_packed_png_and_jpeg_only, setup,
 	                teardown),
+	        cmocka_unit_test_setup_teardown(test_edge_documents, setup,
+	                                        teardown),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
