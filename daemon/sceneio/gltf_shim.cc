@@ -197,6 +197,41 @@ rad_status parse_failed(const std::string &msg, const Refusal &r,
 	                one_line(msg).c_str());
 }
 
+/*
+ * tinygltf's warnings into the report.  An image with an external file is
+ * looked for (and refused) by the filesystem callbacks: tinygltf then
+ * writes "File not found : NAME" and "Failed to load external 'uri' for
+ * image[i]", which read as if we had looked for the user's files.  Those
+ * become one note saying what happened; other lines pass as they are.
+ */
+void note_warnings(const std::string &warn, sio_info *info)
+{
+	std::string rest;
+	size_t images = 0, at = 0;
+	while (at < warn.size()) {
+		size_t end = warn.find('\n', at);
+		if (end == std::string::npos)
+			end = warn.size();
+		std::string line = warn.substr(at, end - at);
+		at = end + 1;
+		if (line.rfind("Failed to load external 'uri' for image", 0) ==
+		    0)
+			images++;
+		else if (line.rfind("File not found : ", 0) != 0 &&
+		         !line.empty())
+			rest += (rest.empty() ? "" : " ") + line;
+	}
+	if (images)
+		sio_note(
+		        info,
+		        "%zu image%s with an external file not read: a scene "
+		        "sent as bytes carries its images (luxrad submit packs "
+		        "a .gltf with the files beside it)",
+		        images, images == 1 ? "" : "s");
+	if (!rest.empty())
+		sio_note(info, "%s", one_line(rest).c_str());
+}
+
 rad_status parse(const unsigned char *b, size_t len, bool glb,
                  tinygltf::Model &m, sio_info *info, rad_error *err)
 {
@@ -212,8 +247,7 @@ rad_status parse(const unsigned char *b, size_t len, bool glb,
 	                        &m, &terr, &twarn,
 	                        reinterpret_cast<const char *>(b),
 	                        (unsigned)len, "");
-	if (!twarn.empty())
-		sio_note(info, "%s", one_line(twarn).c_str());
+	note_warnings(twarn, info);
 	if (!ok)
 		return parse_failed(terr, refusal, m, err);
 	return RAD_OK;

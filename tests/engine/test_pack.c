@@ -8,7 +8,8 @@
  * URI; and every path that would leave the folder is refused with a
  * message naming the buffer: "..", an absolute path, a percent-encoded
  * "..", a scheme, a symbolic link out of the folder, a missing file, a
- * file shorter than byteLength.  Images are packed, PNG and JPEG only.
+ * file shorter than byteLength.  Images are packed, PNG and JPEG only;
+ * one left unpacked is reported in our words.
  */
 #include <setjmp.h>
 #include <stdarg.h>
@@ -235,6 +236,29 @@ static void test_edge_documents(void **state)
 	assert_null(glb);
 }
 
+/* Raw bytes (as the daemon gets them) with an external image: loaded,
+ * the image reported in our words, not tinygltf's "File not found". */
+static void test_unpacked_image_is_reported_plainly(void **state)
+{
+	(void)state;
+	static const char data[] =
+	        "data:application/octet-stream;base64,"
+	        "AAAAAAAAAAAAAAAAAACAPwAAAAAAAAAAAAAAAAAAgD8AAAAA";
+	char doc[4096];
+	snprintf(doc, sizeof(doc), doc_fmt, data, 36,
+	         ",\"images\":[{\"uri\":\"img.png\"}]");
+	rad_scene *sc = NULL;
+	sio_info info;
+	rad_error err = {0};
+	assert_int_equal(sio_load((const unsigned char *)doc, strlen(doc), &sc,
+	                          &info, NULL, NULL, &err),
+	                 RAD_OK);
+	assert_non_null(strstr(info.warnings, "1 image with an external file "
+	                                      "not read"));
+	assert_null(strstr(info.warnings, "File not found"));
+	rad_scene_free(sc);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -249,6 +273,7 @@ int main(void)
 	                teardown),
 	        cmocka_unit_test_setup_teardown(test_edge_documents, setup,
 	                                        teardown),
+	        cmocka_unit_test(test_unpacked_image_is_reported_plainly),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
