@@ -11,7 +11,6 @@
  *    KB of brackets, are enough).  Bracket depth is counted outside
  *    strings; real glTF nests fewer than 10 levels.
  */
-#include <string.h>
 
 #include "internal.h"
 
@@ -95,7 +94,7 @@ static rad_status check_depth(const unsigned char *p, size_t n, rad_error *err)
 rad_status sio_precheck(const unsigned char *b, size_t len, int *glb,
                         rad_error *err)
 {
-	*glb = len >= 4 && memcmp(b, "glTF", 4) == 0;
+	*glb = sio_is_glb(b, len);
 	if (!*glb)
 		return check_depth(b, len, err);
 	rad_status st = check_glb(b, len, err);

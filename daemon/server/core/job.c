@@ -107,6 +107,19 @@ void srv_job_unregister(srv *s, srv_job *j)
 	srv_job_gone(s, j);
 }
 
+rad_solver *srv_job_detach_solver(srv_job *j)
+{
+	rad_solver *drop = NULL;
+	pthread_mutex_lock(&j->mu);
+	if (srv_job_terminal(j->state) && !j->on_worker) {
+		drop = j->solver;
+		j->solver = NULL;
+		memset(j->solver_mem, 0, sizeof(j->solver_mem));
+	}
+	pthread_mutex_unlock(&j->mu);
+	return drop;
+}
+
 int64_t srv_job_memory_locked(const srv_job *j)
 {
 	SRV_HELD(&j->mu);

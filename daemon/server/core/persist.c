@@ -137,16 +137,3 @@ int srv_job_store_remove(srv *s, srv_job *j, char *msg, size_t msglen)
 	pthread_mutex_unlock(&s->store_mu);
 	return rc;
 }
-
-rad_solver *srv_job_detach_solver(srv_job *j)
-{
-	rad_solver *drop = NULL;
-	pthread_mutex_lock(&j->mu);
-	if (srv_job_terminal(j->state) && !j->on_worker) {
-		drop = j->solver;
-		j->solver = NULL;
-		memset(j->solver_mem, 0, sizeof(j->solver_mem));
-	}
-	pthread_mutex_unlock(&j->mu);
-	return drop;
-}
