@@ -331,6 +331,65 @@ static int export_mesh(const char *path, const rad_scene *sc,
 	return rc;
 }
 
+/*
+ * --polygons: the committed scene's polygons as CSV, one per line, so a
+ * user can see what was read (a textured polygon's reflectance is its
+ * texture's mean under it).  Corners 4 are empty for triangles.
+ */
+static int write_polygons(const char *path, const rad_scene *sc)
+{
+	rad_scene_counts counts;
+	rad_polygon_desc p;
+	rad_error err = {0};
+	char *buf = NULL;
+	size_t len = 0;
+	FILE *f = open_memstream(&buf, &len);
+	if (!f) {
+		fprintf(stderr, "luxrad-solve: out of memory\n");
+		return EXIT_SOLVE;
+	}
+	rad_scene_counts_get(sc, &counts);
+	fprintf(f, "polygon,node,corners");
+	for (int k = 0; k < 4; k++)
+		fprintf(f, ",x%d,y%d,z%d", k, k, k);
+	fprintf(f, ",area,rho_r,rho_g,rho_b,lum_r,lum_g,lum_b\n");
+	for (uint32_t i = 0; i < counts.polygons; i++) {
+		if (rad_scene_polygon_get(sc, i, &p, &err) != RAD_OK) {
+			fclose(f);
+			free(buf);
+			return engine_error("polygons", &err);
+		}
+		/* A node name is quoted, its quotes doubled (RFC 4180). */
+		fprintf(f, "%u,\"", i);
+		for (const char *c = rad_scene_node_name(sc, p.node); *c; c++) {
+			if (*c == '"')
+				fputc('"', f);
+			fputc(*c, f);
+		}
+		fprintf(f, "\",%d", p.ncorners);
+		for (int k = 0; k < 4; k++)
+			for (int c = 0; c < 3; c++)
+				if (k < p.ncorners)
+					fprintf(f, ",%.9g", p.corners[k][c]);
+				else
+					fputs(",", f);
+		fprintf(f, ",%.9g", p.area);
+		for (int c = 0; c < 3; c++)
+			fprintf(f, ",%.9g", p.reflectance[c]);
+		for (int c = 0; c < 3; c++)
+			fprintf(f, ",%.9g", p.luminance[c]);
+		fputc('\n', f);
+	}
+	if (fclose(f) != 0) {
+		free(buf);
+		fprintf(stderr, "luxrad-solve: out of memory\n");
+		return EXIT_SOLVE;
+	}
+	int rc = write_file_atomic(path, buf, len);
+	free(buf);
+	return rc;
+}
+
 /* Solve the loaded scene, query the points and print the report. */
 /* Lux and error estimates at every point, timed. */
 static rad_status query_points(const rad_solver *sv, const point_list *pl,
@@ -430,6 +489,8 @@ int main(int argc, char **argv)
 	if (rc == EXIT_OKAY)
 		rc = tool_scene_load(PROG, a.scene_path, &sc, &info,
 		                     &load_seconds);
+	if (rc == EXIT_OKAY && a.polygons_path)
+		rc = write_polygons(a.polygons_path, sc);
 	if (rc == EXIT_OKAY)
 		rc = solve_and_report(&a, sc, &info, &pl, load_seconds);
 	rad_scene_free(sc);

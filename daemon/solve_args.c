@@ -52,6 +52,9 @@ static const tool_option tool_options[] = {
          "query illuminance at the points in FILE"},
         {"export", "FILE", T_STRING, ARG(export_path),
          "write the solved mesh to FILE (.glb; .gltf for JSON)"},
+        {"polygons", "FILE", T_STRING, ARG(polygons_path),
+         "write the scene's polygons as the solvers see them (corners, "
+         "node, reflectance, luminance) to FILE as CSV"},
         {"json", NULL, T_FLAG, ARG(json),
          "print one JSON object on stdout instead of the report"},
         {"per-iteration", NULL, T_FLAG, ARG(per_iteration),

@@ -51,6 +51,7 @@ int tool_points_load(const char *prog, const char *path, double **xyz,
 	X(materials) X(materials_offered) X(lights) X(emitters) X(nodes)
 #define IMPORT_COUNTERS(X)                                                     \
 	X(meshes) X(primitives) X(primitives_skipped) X(textures_ignored)      \
+	X(textures_read) X(images_decoded) X(textured_triangles)               \
 	X(metallic_materials)
 /* clang-format on */
 

@@ -12,18 +12,21 @@
 set -euo pipefail
 
 # Build: compiler, CMake + Ninja, pkg-config (jansson, cmocka), formatter.
-# Engine and tools: Embree (BVH, pulls libtbb-dev), tinygltf, jansson.
+# Engine and tools: Embree (BVH, pulls libtbb-dev), tinygltf, jansson;
+# libpng and libjpeg-turbo decode base-colour textures.
 # Daemon and its tests: libmodbus, SQLite, cmocka; real Modbus peers
 # (mbpoll, pymodbus) for end-to-end tests; gnuplot for the study plots;
-# python3 validates JSON in the CLI test; Node.js + npm run the Khronos
+# python3 validates JSON in the CLI test, with numpy and Pillow reads
+# textures independently in test_textures; Node.js + npm run the Khronos
 # glTF validator.
 # python3-serial-asyncio is only a Recommends of python3-pymodbus, but
 # `import pymodbus.client` fails without it, so it is listed explicitly.
 PACKAGES=(
 	build-essential cmake ninja-build pkg-config clang-format
 	libembree-dev libtinygltf-dev libmodbus-dev libcmocka-dev
-	libjansson-dev libsqlite3-dev
+	libjansson-dev libsqlite3-dev libpng-dev libjpeg62-turbo-dev
 	mbpoll gnuplot-nox python3 python3-pymodbus python3-serial-asyncio
+	python3-numpy python3-pil
 	nodejs npm
 )
 

@@ -112,7 +112,8 @@ static int forms_parallelogram(const rad_scene *s, uint32_t t, int k,
                                uint32_t u, int j)
 {
 	const rad_poly *pt = &s->polys[t], *pu = &s->polys[u];
-	if (pt->mat != pu->mat || pt->node != pu->node)
+	if (rad_scene_merge_key(s, t) != rad_scene_merge_key(s, u) ||
+	    pt->node != pu->node)
 		return 0;
 	if (v3_dot(v3_f(pt->n), v3_f(pu->n)) < 1.0 - MERGE_COPLANAR)
 		return 0;
@@ -129,6 +130,29 @@ static int forms_parallelogram(const rad_scene *s, uint32_t t, int k,
 	double tol = MERGE_CLOSE_REL * lmax + 4.0 * FLT_EPSILON * cmax;
 	v3 gap = v3_sub(d, v3_sub(v3_add(b, c), a));
 	return v3_len(gap) <= tol;
+}
+
+/*
+ * The reflectance of the quad t and u make when each came with its own
+ * (a textured surface): the area-weighted mean of theirs, a material of
+ * its own, with t's luminance (both have their base's).
+ */
+static rad_status quad_material(rad_scene *s, uint32_t t, uint32_t u,
+                                rad_error *err)
+{
+	rad_poly *pt = &s->polys[t];
+	const rad_poly *pu = &s->polys[u];
+	if (pt->mat == pu->mat)
+		return RAD_OK;
+	rad_material m = s->mats[pt->mat];
+	const rad_material *mu = &s->mats[pu->mat];
+	double at = pt->area, au = pu->area;
+	for (int c = 0; c < 3; c++) {
+		float r =
+		        (float)((at * m.rho[c] + au * mu->rho[c]) / (at + au));
+		m.rho[c] = r < 1.0f ? r : nextafterf(1.0f, 0.0f);
+	}
+	return rad_scene_material_id(s, &m, &pt->mat, err);
 }
 
 /* Rewrite triangle t as the parallelogram with corner a (opposite edge k). */
@@ -197,8 +221,8 @@ static int duplicate_of_earlier(const rad_scene *s, const edge_map *m,
 }
 
 /* Pair t with its first mergeable free neighbour. */
-static void pair_triangle(rad_scene *s, const edge_map *m, uint8_t *pair,
-                          uint32_t t)
+static rad_status pair_triangle(rad_scene *s, const edge_map *m, uint8_t *pair,
+                                uint32_t t, rad_error *err)
 {
 	int order[3];
 	edges_by_length(s->stage, t, order);
@@ -211,11 +235,49 @@ static void pair_triangle(rad_scene *s, const edge_map *m, uint8_t *pair,
 		uint32_t u = e / 3;
 		if (!forms_parallelogram(s, t, k, u, (int)(e % 3)))
 			continue;
+		rad_status st = quad_material(s, t, u, err);
+		if (st)
+			return st;
 		make_quad(s, t, k);
 		pair[t] = PAIR_QUAD;
 		pair[u] = PAIR_ABSORBED;
-		return;
+		return RAD_OK;
 	}
+	return RAD_OK;
+}
+
+/*
+ * Textured surfaces leave materials no polygon uses (a triangle's own,
+ * once its quad took the mean): the table keeps the used ones, in order.
+ */
+static rad_status drop_unused_materials(rad_scene *s, rad_error *err)
+{
+	uint32_t *to =
+	        rad_mem_calloc(&s->mem, RAD_MEM_SCRATCH, s->nmats, sizeof(*to));
+	if (!to)
+		return rad_fail(err, RAD_ERR_NOMEM,
+		                "commit: out of memory sorting %u materials",
+		                s->nmats);
+	for (uint32_t i = 0; i < s->npolys; i++)
+		to[s->polys[i].mat] = 1;
+	uint32_t n = 0;
+	for (uint32_t i = 0; i < s->nmats; i++)
+		if (to[i]) {
+			s->mats[n] = s->mats[i];
+			to[i] = n++;
+		}
+	for (uint32_t i = 0; i < s->npolys; i++)
+		s->polys[i].mat = to[s->polys[i].mat];
+	rad_mem_free(&s->mem, RAD_MEM_SCRATCH, to);
+	rad_material *fit = rad_mem_realloc(&s->mem, RAD_MEM_MATERIALS, s->mats,
+	                                    n * sizeof(*s->mats));
+	if (fit) {
+		s->mats = fit;
+		s->cap_mats = n;
+	}
+	s->nmats = n;
+	s->counts.materials = n;
+	return RAD_OK;
 }
 
 static rad_status merge_quads(rad_scene *s, rad_error *err)
@@ -234,9 +296,15 @@ static rad_status merge_quads(rad_scene *s, rad_error *err)
 			pair[t] = PAIR_DUPLICATE;
 			s->counts.triangles_duplicate++;
 		}
-	for (uint32_t t = 0; t < s->npolys; t++)
+	rad_status st = RAD_OK;
+	for (uint32_t t = 0; t < s->npolys && !st; t++)
 		if (pair[t] == PAIR_NONE)
-			pair_triangle(s, &m, pair, t);
+			st = pair_triangle(s, &m, pair, t, err);
+	if (st) {
+		rad_mem_free(&s->mem, RAD_MEM_SCRATCH, m.slot);
+		rad_mem_free(&s->mem, RAD_MEM_SCRATCH, pair);
+		return st;
+	}
 	uint32_t n = 0;
 	for (uint32_t t = 0; t < s->npolys; t++)
 		if (pair[t] == PAIR_NONE || pair[t] == PAIR_QUAD)
@@ -247,7 +315,12 @@ static rad_status merge_quads(rad_scene *s, rad_error *err)
 	rad_mem_free(&s->mem, RAD_MEM_GEOMETRY, s->stage);
 	s->stage = NULL;
 	rad_scene_fit_polys(s);
-	return RAD_OK;
+	rad_scene_material_index_free(s);
+	if (!s->stage_base)
+		return RAD_OK;
+	rad_mem_free(&s->mem, RAD_MEM_GEOMETRY, s->stage_base);
+	s->stage_base = NULL;
+	return drop_unused_materials(s, err);
 }
 
 /* -------------------------------------------------------- bounds and flux */
@@ -369,7 +442,9 @@ void rad_scene_free(rad_scene *s)
 	rad_vis_free(s);
 	rad_mem_free(&s->mem, RAD_MEM_GEOMETRY, s->polys);
 	rad_mem_free(&s->mem, RAD_MEM_GEOMETRY, s->stage);
+	rad_mem_free(&s->mem, RAD_MEM_GEOMETRY, s->stage_base);
 	rad_mem_free(&s->mem, RAD_MEM_MATERIALS, s->mats);
+	rad_scene_material_index_free(s);
 	for (uint32_t i = 0; i < s->nlights; i++)
 		rad_mem_free(&s->mem, RAD_MEM_NAMES, s->lights[i].name);
 	rad_mem_free(&s->mem, RAD_MEM_LIGHTS, s->lights);

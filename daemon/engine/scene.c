@@ -116,10 +116,101 @@ static int same_material(const rad_material *a, const rad_material *b)
 }
 
 /*
- * Sharing is a linear search: scenes offer materials per glTF material or
- * primitive (tens to a few thousands), never per triangle, so the table
- * stays small and a hash would cost more code than it saves time.
+ * Sharing: a linear search while the table is small (scenes offer
+ * materials per glTF material, tens to a few thousands), then a hash,
+ * which textured scenes need: each distinct texture mean under a polygon
+ * is a material of its own.  The hash lives until commit.
  */
+#define MAT_LINEAR 64
+
+static uint32_t material_hash(const rad_material *m)
+{
+	uint32_t h = 0x811c9dc5u, bits[6];
+	memcpy(bits, m->rho, sizeof(m->rho));
+	memcpy(bits + 3, m->emit, sizeof(m->emit));
+	for (int i = 0; i < 6; i++) {
+		h = (h ^ bits[i]) * 0x01000193u;
+		h ^= h >> 15;
+	}
+	return h * 0x9e3779b1u;
+}
+
+static void material_index_put(rad_scene *s, uint32_t id)
+{
+	uint32_t i = material_hash(&s->mats[id]) & s->mat_mask;
+	while (s->mat_slots[i])
+		i = (i + 1) & s->mat_mask;
+	s->mat_slots[i] = id + 1;
+}
+
+/* Keep the hash at most half full; 0 if out of memory. */
+static int material_index_fit(rad_scene *s, uint32_t n)
+{
+	if (n < MAT_LINEAR)
+		return 1;
+	if (s->mat_slots && 2 * (size_t)n <= (size_t)s->mat_mask + 1)
+		return 1;
+	size_t cap = 2 * (size_t)MAT_LINEAR;
+	while (cap < 2 * (size_t)n)
+		cap *= 2;
+	uint32_t *slots =
+	        rad_mem_calloc(&s->mem, RAD_MEM_MATERIALS, cap, sizeof(*slots));
+	if (!slots)
+		return 0;
+	rad_mem_free(&s->mem, RAD_MEM_MATERIALS, s->mat_slots);
+	s->mat_slots = slots;
+	s->mat_mask = (uint32_t)(cap - 1);
+	for (uint32_t id = 0; id < s->nmats; id++)
+		material_index_put(s, id);
+	return 1;
+}
+
+void rad_scene_material_index_free(rad_scene *s)
+{
+	rad_mem_free(&s->mem, RAD_MEM_MATERIALS, s->mat_slots);
+	s->mat_slots = NULL;
+	s->mat_mask = 0;
+}
+
+static int material_find(const rad_scene *s, const rad_material *m,
+                         uint32_t *id)
+{
+	if (!s->mat_slots) {
+		for (uint32_t i = 0; i < s->nmats; i++)
+			if (same_material(&s->mats[i], m)) {
+				*id = i;
+				return 1;
+			}
+		return 0;
+	}
+	for (uint32_t i = material_hash(m) & s->mat_mask; s->mat_slots[i];
+	     i = (i + 1) & s->mat_mask)
+		if (same_material(&s->mats[s->mat_slots[i] - 1], m)) {
+			*id = s->mat_slots[i] - 1;
+			return 1;
+		}
+	return 0;
+}
+
+rad_status rad_scene_material_id(rad_scene *s, const rad_material *m,
+                                 uint32_t *id, rad_error *err)
+{
+	if (material_find(s, m, id))
+		return RAD_OK;
+	if (s->nmats >= MAX_IDS)
+		return rad_fail(err, RAD_ERR_LIMIT, "material: too many");
+	if (!grow(&s->mem, RAD_MEM_MATERIALS, (void **)&s->mats, &s->cap_mats,
+	          s->nmats + 1, sizeof(*s->mats)) ||
+	    !material_index_fit(s, s->nmats + 1))
+		return rad_fail(err, RAD_ERR_NOMEM, "material: out of memory");
+	s->mats[s->nmats] = *m;
+	if (s->mat_slots)
+		material_index_put(s, s->nmats);
+	*id = s->nmats++;
+	s->counts.materials = s->nmats;
+	return RAD_OK;
+}
+
 rad_status rad_scene_add_material(rad_scene *s, const double reflectance[3],
                                   const double luminance[3], uint32_t *id,
                                   rad_error *err)
@@ -133,21 +224,7 @@ rad_status rad_scene_add_material(rad_scene *s, const double reflectance[3],
 	if (st)
 		return st;
 	s->counts.materials_offered++;
-	for (uint32_t i = 0; i < s->nmats; i++) {
-		if (same_material(&s->mats[i], &m)) {
-			*id = i;
-			return RAD_OK;
-		}
-	}
-	if (s->nmats >= MAX_IDS)
-		return rad_fail(err, RAD_ERR_LIMIT, "material: too many");
-	if (!grow(&s->mem, RAD_MEM_MATERIALS, (void **)&s->mats, &s->cap_mats,
-	          s->nmats + 1, sizeof(*s->mats)))
-		return rad_fail(err, RAD_ERR_NOMEM, "material: out of memory");
-	s->mats[s->nmats] = m;
-	*id = s->nmats++;
-	s->counts.materials = s->nmats;
-	return RAD_OK;
+	return rad_scene_material_id(s, &m, id, err);
 }
 
 /* ----------------------------------------------------------------- nodes */
@@ -233,13 +310,38 @@ static rad_status reserve_polys(rad_scene *s, size_t ntri, rad_error *err)
 	if (!stage)
 		return rad_fail(err, RAD_ERR_NOMEM, "triangles: out of memory");
 	s->stage = stage;
+	if (s->stage_base) {
+		uint32_t *base = rad_mem_realloc(&s->mem, RAD_MEM_GEOMETRY,
+		                                 s->stage_base,
+		                                 (size_t)cap * sizeof(*base));
+		if (!base)
+			return rad_fail(err, RAD_ERR_NOMEM,
+			                "triangles: out of memory");
+		s->stage_base = base;
+	}
 	s->cap_polys = cap;
 	return RAD_OK;
 }
 
-rad_status rad_scene_add_triangles(rad_scene *s, uint32_t material,
-                                   uint32_t node, const double *xyz,
-                                   size_t ntri, rad_error *err)
+/* The first triangles with their own reflectance: every polygon so far
+ * merges by its material. */
+static rad_status start_stage_base(rad_scene *s, rad_error *err)
+{
+	if (s->stage_base || s->cap_polys == 0)
+		return RAD_OK;
+	s->stage_base =
+	        rad_mem_alloc(&s->mem, RAD_MEM_GEOMETRY,
+	                      (size_t)s->cap_polys * sizeof(*s->stage_base));
+	if (!s->stage_base)
+		return rad_fail(err, RAD_ERR_NOMEM, "triangles: out of memory");
+	for (uint32_t i = 0; i < s->npolys; i++)
+		s->stage_base[i] = s->polys[i].mat;
+	return RAD_OK;
+}
+
+static rad_status add_triangles(rad_scene *s, uint32_t material, uint32_t node,
+                                const double *xyz, const double *rho,
+                                size_t ntri, rad_error *err)
 {
 	rad_status st = rad_scene_check_open(s, "triangles", err);
 	if (st)
@@ -262,7 +364,15 @@ rad_status rad_scene_add_triangles(rad_scene *s, uint32_t material,
 		return rad_fail(err, RAD_ERR_STATE,
 		                "triangles: a failed commit has merged the "
 		                "scene; only commit may be retried");
+	for (size_t i = 0; rho && i < 3 * ntri; i++)
+		if (!(rho[i] >= 0.0 && rho[i] < 1.0))
+			return rad_fail(err, RAD_ERR_INVALID,
+			                "triangles: reflectance %g of triangle "
+			                "%zu must be finite and in [0, 1)",
+			                rho[i], i / 3);
 	if ((st = reserve_polys(s, ntri, err)))
+		return st;
+	if (rho && (st = start_stage_base(s, err)))
 		return st;
 	for (size_t i = 0; i < ntri; i++) {
 		rad_poly *p = &s->polys[s->npolys];
@@ -280,10 +390,38 @@ rad_status rad_scene_add_triangles(rad_scene *s, uint32_t material,
 		}
 		p->mat = material;
 		p->node = node;
+		if (rho) {
+			rad_material m = s->mats[material];
+			for (int c = 0; c < 3; c++)
+				m.rho[c] = rho_float(rho[3 * i + c]);
+			if ((st = rad_scene_material_id(s, &m, &p->mat, err)))
+				return st;
+		}
+		if (s->stage_base)
+			s->stage_base[s->npolys] =
+			        rho ? RAD_TEXTURED_BASE + material : p->mat;
 		s->npolys++;
 	}
 	s->counts.polygons = s->npolys;
 	return RAD_OK;
+}
+
+rad_status rad_scene_add_triangles(rad_scene *s, uint32_t material,
+                                   uint32_t node, const double *xyz,
+                                   size_t ntri, rad_error *err)
+{
+	return add_triangles(s, material, node, xyz, NULL, ntri, err);
+}
+
+rad_status rad_scene_add_triangles_rho(rad_scene *s, uint32_t material,
+                                       uint32_t node, const double *xyz,
+                                       const double *rho, size_t ntri,
+                                       rad_error *err)
+{
+	if (ntri && !rho)
+		return rad_fail(err, RAD_ERR_INVALID,
+		                "triangles: NULL reflectances for %zu", ntri);
+	return add_triangles(s, material, node, xyz, rho, ntri, err);
 }
 
 /* ---------------------------------------------------------------- lights */
@@ -384,4 +522,36 @@ void rad_scene_bounds(const rad_scene *s, double lo[3], double hi[3])
 {
 	memcpy(lo, s->lo, sizeof(s->lo));
 	memcpy(hi, s->hi, sizeof(s->hi));
+}
+
+rad_status rad_scene_polygon_get(const rad_scene *s, uint32_t i,
+                                 rad_polygon_desc *out, rad_error *err)
+{
+	if (!s->committed)
+		return rad_fail(err, RAD_ERR_STATE,
+		                "polygon: the scene is not committed");
+	if (i >= s->npolys)
+		return rad_fail(err, RAD_ERR_INVALID,
+		                "polygon %u does not exist (%u polygons)", i,
+		                s->npolys);
+	const rad_poly *p = &s->polys[i];
+	const rad_material *m = &s->mats[p->mat];
+	out->ncorners = p->quad ? 4 : 3;
+	for (int c = 0; c < 3; c++) {
+		out->corners[0][c] = p->p0[c];
+		out->corners[1][c] = (double)p->p0[c] + p->e1[c];
+		if (p->quad) {
+			out->corners[2][c] =
+			        (double)p->p0[c] + p->e1[c] + p->e2[c];
+			out->corners[3][c] = (double)p->p0[c] + p->e2[c];
+		} else {
+			out->corners[2][c] = (double)p->p0[c] + p->e2[c];
+		}
+		out->normal[c] = p->n[c];
+		out->reflectance[c] = m->rho[c];
+		out->luminance[c] = m->emit[c] / M_PI;
+	}
+	out->area = p->area;
+	out->node = p->node;
+	return RAD_OK;
 }

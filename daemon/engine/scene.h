@@ -68,8 +68,17 @@ struct rad_scene {
 	                 input vertices, 9 per polygon, so that quad
 	                 merging finds shared edges by exact match */
 
+	uint32_t *stage_base; /* GEOMETRY, until commit; NULL until a
+	                         triangle comes with its own reflectance:
+	                         per polygon, what quad merging matches
+	                         (rad_scene_merge_key) */
+
 	rad_material *mats; /* MATERIALS; shared, stored once each */
 	uint32_t nmats, cap_mats;
+	uint32_t *mat_slots; /* MATERIALS, until commit; NULL while the
+	                        table is small: open addressing, id + 1
+	                        (0 = free), mat_mask + 1 slots */
+	uint32_t mat_mask;
 
 	rad_light *lights; /* LIGHTS */
 	uint32_t nlights, cap_lights;
@@ -85,6 +94,22 @@ struct rad_scene {
 	rad_scene_counts counts;
 	rad_vis *vis; /* BVH over the polygons, after commit */
 };
+
+/* Stage bases of triangles offered with their own reflectance: the
+ * material they came with, offset so they never match a plain one. */
+#define RAD_TEXTURED_BASE (1u << 28)
+
+/* Triangles t and u may merge into a quad only if these agree. */
+static inline uint32_t rad_scene_merge_key(const rad_scene *s, uint32_t t)
+{
+	return s->stage_base ? s->stage_base[t] : s->polys[t].mat;
+}
+
+/* The id of material m, added if no equal one is stored (scene.c). */
+rad_status rad_scene_material_id(rad_scene *s, const rad_material *m,
+                                 uint32_t *id, rad_error *err);
+/* Release the material hash (commit: no more materials come). */
+void rad_scene_material_index_free(rad_scene *s);
 
 /* What became of a polygon's stored shape (rad_poly_check_stored). */
 enum rad_poly_verdict { RAD_POLY_OK, RAD_POLY_NONFINITE, RAD_POLY_DEGENERATE };

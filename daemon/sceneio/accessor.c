@@ -30,6 +30,31 @@ static const char *type_name(int type)
 	}
 }
 
+/* bufferView vi (range-checked) and its buffer, which must hold it. */
+static rad_status view_in_buffer(const sio_doc *d, const char *where, int vi,
+                                 const sio_doc_view **out,
+                                 const sio_doc_buffer **buf, rad_error *err)
+{
+	const sio_doc_view *bv = &d->views[vi];
+	if (bv->buffer < 0 || (size_t)bv->buffer >= d->nbuffers)
+		return rad_fail(
+		        err, RAD_ERR_INVALID,
+		        "%s: bufferView %d: buffer %d out of range (%zu "
+		        "buffers)",
+		        where, vi, bv->buffer, d->nbuffers);
+	const sio_doc_buffer *b = &d->buffers[bv->buffer];
+	if (bv->byte_offset > b->size ||
+	    bv->byte_length > b->size - bv->byte_offset)
+		return rad_fail(err, RAD_ERR_INVALID,
+		                "%s: bufferView %d (offset %zu, length %zu) "
+		                "runs past the end of buffer %d (%zu bytes)",
+		                where, vi, bv->byte_offset, bv->byte_length,
+		                bv->buffer, b->size);
+	*out = bv;
+	*buf = b;
+	return RAD_OK;
+}
+
 /* The bufferView of accessor ai (already range-checked) and its bytes. */
 static rad_status view_bytes(const sio_doc *d, const char *where,
                              const char *role, int ai, const sio_doc_view **out,
@@ -50,24 +75,7 @@ static rad_status view_bytes(const sio_doc *d, const char *where,
 		                "%s: %s %d: bufferView %d out of range (%zu "
 		                "bufferViews)",
 		                where, role, ai, a->buffer_view, d->nviews);
-	const sio_doc_view *bv = &d->views[a->buffer_view];
-	if (bv->buffer < 0 || (size_t)bv->buffer >= d->nbuffers)
-		return rad_fail(
-		        err, RAD_ERR_INVALID,
-		        "%s: bufferView %d: buffer %d out of range (%zu "
-		        "buffers)",
-		        where, a->buffer_view, bv->buffer, d->nbuffers);
-	const sio_doc_buffer *b = &d->buffers[bv->buffer];
-	if (bv->byte_offset > b->size ||
-	    bv->byte_length > b->size - bv->byte_offset)
-		return rad_fail(err, RAD_ERR_INVALID,
-		                "%s: bufferView %d (offset %zu, length %zu) "
-		                "runs past the end of buffer %d (%zu bytes)",
-		                where, a->buffer_view, bv->byte_offset,
-		                bv->byte_length, bv->buffer, b->size);
-	*out = bv;
-	*buf = b;
-	return RAD_OK;
+	return view_in_buffer(d, where, a->buffer_view, out, buf, err);
 }
 
 /*
@@ -124,52 +132,69 @@ static rad_status accessor_at(const sio_doc *d, const char *where,
 	return RAD_OK;
 }
 
-rad_status sio_position_view(const sio_doc *d, const char *where, int ai,
+/* Bytes of a component of type ct, 0 for none we read. */
+static size_t component_bytes(int ct)
+{
+	switch (ct) {
+	case SIO_GL_UNSIGNED_BYTE:
+		return 1;
+	case SIO_GL_UNSIGNED_SHORT:
+		return 2;
+	case SIO_GL_UNSIGNED_INT:
+	case SIO_GL_FLOAT:
+		return 4;
+	default:
+		return 0;
+	}
+}
+
+/*
+ * Accessor ai as a view of elements of ncomp components of type `type`;
+ * allowed lists the component types (0-terminated), integers only when
+ * normalized if `norm`; must says all that in messages.
+ */
+static rad_status typed_view(const sio_doc *d, const char *where,
+                             const char *role, int ai, int type, int ncomp,
+                             const int *allowed, int norm, const char *must,
                              sio_view *v, rad_error *err)
 {
-	const char *role = "POSITION accessor";
 	const sio_doc_accessor *a = NULL;
 	rad_status st = accessor_at(d, where, role, ai, &a, err);
 	if (st != RAD_OK)
 		return st;
-	if (a->type != SIO_GL_VEC3 || a->component_type != SIO_GL_FLOAT)
+	int ok = 0;
+	for (const int *ct = allowed; *ct; ct++)
+		ok |= a->component_type == *ct &&
+		      (!norm || *ct == SIO_GL_FLOAT || a->normalized);
+	if (a->type != type || !ok)
 		return rad_fail(err, RAD_ERR_INVALID,
-		                "%s: POSITION accessor %d must be VEC3 of "
-		                "FLOAT (componentType 5126), not %s of "
-		                "componentType %d",
-		                where, ai, type_name(a->type),
+		                "%s: %s %d must be %s, not %s of componentType "
+		                "%d",
+		                where, role, ai, must, type_name(a->type),
 		                a->component_type);
-	return accessor_view(d, where, role, ai, 12, v, err);
+	return accessor_view(d, where, role, ai,
+	                     ncomp * component_bytes(a->component_type), v,
+	                     err);
+}
+
+rad_status sio_position_view(const sio_doc *d, const char *where, int ai,
+                             sio_view *v, rad_error *err)
+{
+	static const int allowed[] = {SIO_GL_FLOAT, 0};
+	return typed_view(d, where, "POSITION accessor", ai, SIO_GL_VEC3, 3,
+	                  allowed, 0, "VEC3 of FLOAT (componentType 5126)", v,
+	                  err);
 }
 
 rad_status sio_index_view(const sio_doc *d, const char *where, int ai,
                           sio_view *v, rad_error *err)
 {
-	const char *role = "index accessor";
-	const sio_doc_accessor *a = NULL;
-	rad_status st = accessor_at(d, where, role, ai, &a, err);
-	if (st != RAD_OK)
-		return st;
-	size_t size = 0;
-	switch (a->component_type) {
-	case SIO_GL_UNSIGNED_BYTE:
-		size = 1;
-		break;
-	case SIO_GL_UNSIGNED_SHORT:
-		size = 2;
-		break;
-	case SIO_GL_UNSIGNED_INT:
-		size = 4;
-		break;
-	}
-	if (a->type != SIO_GL_SCALAR || size == 0)
-		return rad_fail(err, RAD_ERR_INVALID,
-		                "%s: index accessor %d must be SCALAR of "
-		                "unsigned byte, short or int, not %s of "
-		                "componentType %d",
-		                where, ai, type_name(a->type),
-		                a->component_type);
-	return accessor_view(d, where, role, ai, size, v, err);
+	static const int allowed[] = {SIO_GL_UNSIGNED_BYTE,
+	                              SIO_GL_UNSIGNED_SHORT,
+	                              SIO_GL_UNSIGNED_INT, 0};
+	return typed_view(d, where, "index accessor", ai, SIO_GL_SCALAR, 1,
+	                  allowed, 0, "SCALAR of unsigned byte, short or int",
+	                  v, err);
 }
 
 /* glTF data is little-endian, as is x86. */
@@ -186,4 +211,52 @@ size_t sio_index_at(const sio_view *v, size_t k)
 	uint32_t x;
 	memcpy(&x, p, 4);
 	return x;
+}
+
+rad_status sio_uv_view(const sio_doc *d, const char *where, int ai, sio_view *v,
+                       rad_error *err)
+{
+	static const int allowed[] = {SIO_GL_FLOAT, SIO_GL_UNSIGNED_BYTE,
+	                              SIO_GL_UNSIGNED_SHORT, 0};
+	return typed_view(d, where, "TEXCOORD accessor", ai, SIO_GL_VEC2, 2,
+	                  allowed, 1,
+	                  "VEC2 of FLOAT or of normalized unsigned byte or "
+	                  "short",
+	                  v, err);
+}
+
+void sio_uv_at(const sio_view *v, size_t k, double uv[2])
+{
+	const unsigned char *p = v->p + k * v->stride;
+	for (int i = 0; i < 2; i++) {
+		if (v->size == 8) {
+			float x;
+			memcpy(&x, p + 4 * i, 4);
+			uv[i] = x;
+		} else if (v->size == 2) {
+			uv[i] = p[i] / 255.0;
+		} else {
+			uint16_t x;
+			memcpy(&x, p + 2 * i, 2);
+			uv[i] = x / 65535.0;
+		}
+	}
+}
+
+rad_status sio_view_bytes(const sio_doc *d, const char *where, int vi,
+                          const unsigned char **p, size_t *len, rad_error *err)
+{
+	if (vi < 0 || (size_t)vi >= d->nviews)
+		return rad_fail(err, RAD_ERR_INVALID,
+		                "%s: bufferView %d out of range (%zu "
+		                "bufferViews)",
+		                where, vi, d->nviews);
+	const sio_doc_view *bv = NULL;
+	const sio_doc_buffer *b = NULL;
+	rad_status st = view_in_buffer(d, where, vi, &bv, &b, err);
+	if (st != RAD_OK)
+		return st;
+	*p = b->data + bv->byte_offset;
+	*len = bv->byte_length;
+	return RAD_OK;
 }

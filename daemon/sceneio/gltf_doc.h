@@ -42,11 +42,17 @@ enum {
 	SIO_GL_VEC2 = 2,
 	SIO_GL_VEC3 = 3,
 	SIO_GL_VEC4 = 4,
-	SIO_GL_SCALAR = 65
+	SIO_GL_SCALAR = 65,
+	SIO_GL_REPEAT = 10497, /* sampler wrap modes */
+	SIO_GL_CLAMP_TO_EDGE = 33071,
+	SIO_GL_MIRRORED_REPEAT = 33648
 };
+
+#define SIO_TEXCOORDS 4 /* TEXCOORD_0..3 are looked at */
 
 #define SIO_LIGHTS_EXT "KHR_lights_punctual"
 #define SIO_STRENGTH_EXT "KHR_materials_emissive_strength"
+#define SIO_TRANSFORM_EXT "KHR_texture_transform"
 #define SIO_SENSOR_EXTRA "luxrad_sensor" /* key in a node's extras */
 
 typedef struct sio_str {
@@ -73,10 +79,11 @@ typedef struct sio_doc_node {
 
 typedef struct sio_doc_prim {
 	int mode;
-	int has_position; /* a POSITION attribute is present */
-	int position;     /* its accessor */
-	int indices;      /* accessor, -1: not indexed */
-	int material;     /* -1: glTF's default material */
+	int has_position;            /* a POSITION attribute is present */
+	int position;                /* its accessor */
+	int indices;                 /* accessor, -1: not indexed */
+	int material;                /* -1: glTF's default material */
+	int texcoord[SIO_TEXCOORDS]; /* TEXCOORD_n accessors, -1: absent */
 } sio_doc_prim;
 
 typedef struct sio_doc_mesh {
@@ -90,6 +97,7 @@ typedef struct sio_doc_accessor {
 	int buffer_view; /* -1: none */
 	int component_type;
 	int type; /* SIO_GL_SCALAR, SIO_GL_VEC3... */
+	int normalized;
 	size_t count, byte_offset;
 } sio_doc_accessor;
 
@@ -109,7 +117,33 @@ typedef struct sio_doc_material {
 	double emissive[3];   /* emissiveFactor */
 	double metallic;      /* metallicFactor */
 	unsigned textures;    /* texture references (of the five kinds) */
+	/* baseColorTexture: texture index (-1: none) and UV set; its
+	 * KHR_texture_transform, the identity when absent. */
+	int base_texture, base_texcoord;
+	int has_transform;      /* the extension is present */
+	int transform_bad;      /* ...but a member has the wrong type or size */
+	int transform_texcoord; /* its texCoord override, -1: none */
+	double offset[2], rotation, scale[2]; /* as the extension's members */
 } sio_doc_material;
+
+typedef struct sio_doc_texture {
+	int source;  /* image, -1: none */
+	int sampler; /* -1: glTF's default (repeat) */
+} sio_doc_texture;
+
+typedef struct sio_doc_sampler {
+	int wrap_s, wrap_t;
+} sio_doc_sampler;
+
+/* An image: its bytes are a bufferView's, or a data: URI's that the
+ * shim kept (data), or in a file no one read (external). */
+typedef struct sio_doc_image {
+	sio_str name, mime_type;
+	int buffer_view;           /* -1: none */
+	const unsigned char *data; /* a data: URI's bytes, else NULL */
+	size_t size;
+	int external; /* a uri other than data: (never read) */
+} sio_doc_image;
 
 typedef struct sio_doc_light {
 	sio_str name, type;
@@ -130,11 +164,14 @@ typedef struct sio_doc {
 	const sio_doc_view *views;
 	const sio_doc_buffer *buffers;
 	const sio_doc_material *materials;
+	const sio_doc_texture *textures;
+	const sio_doc_sampler *samplers;
+	const sio_doc_image *images;
 	const sio_doc_light *lights;
 	const sio_doc_scene *scenes;
 	const sio_str *required; /* extensionsRequired */
 	size_t nnodes, nmeshes, naccessors, nviews, nbuffers, nmaterials,
-	        nlights, nscenes, nrequired;
+	        ntextures, nsamplers, nimages, nlights, nscenes, nrequired;
 	int default_scene;         /* -1: none given */
 	struct sio_doc_owner *own; /* tinygltf's model behind the pointers */
 } sio_doc;
@@ -142,9 +179,9 @@ typedef struct sio_doc {
 /*
  * Parse a .gltf (glb = 0) or a GLB (glb = 1) that sio_precheck() passed.
  * File access is refused (data: URIs and the GLB chunk are read), images
- * are not decoded.  tinygltf's warnings go to info (may be NULL).  On
- * error *out is NULL and err names the buffer or light at fault when
- * tinygltf's message allows.
+ * are not decoded (texture.c decodes those a material needs).  tinygltf's
+ * warnings go to info (may be NULL).  On error *out is NULL and err names the
+ * buffer or light at fault when tinygltf's message allows.
  */
 rad_status sio_doc_parse(const unsigned char *bytes, size_t len, int glb,
                          sio_doc **out, sio_info *info, rad_error *err);

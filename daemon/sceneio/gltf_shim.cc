@@ -12,8 +12,8 @@
  *  - tinygltf comes from the Debian shared library: no TINYGLTF_* defines
  *    here (they would break the ODR, see docs/PITFALLS.md).  Its filesystem
  *    callbacks are replaced by ones that refuse every path and its image
- *    loader by one that keeps nothing, so a document can neither make us
- *    read a file nor decode an image.
+ *    loader by one that keeps the encoded bytes, so a document can
+ *    neither make us read a file nor have tinygltf decode an image.
  *  - The bytes tinygltf would mishandle (a GLB chunk running past the
  *    data, JSON nested deep enough to overflow its recursion) never reach
  *    it: precheck.c refuses them first.
@@ -155,10 +155,17 @@ bool fs_write(std::string *e, const std::string &,
 	return false;
 }
 
-/* Textures are ignored: keep no pixels, report success. */
-bool skip_image(tinygltf::Image *, const int, std::string *, std::string *, int,
-                int, const unsigned char *, int, void *)
+/*
+ * Images are not decoded here (texture.c decodes those a base colour
+ * needs, when it needs them).  A bufferView's bytes stay where they are;
+ * a data: URI's, decoded by tinygltf into a temporary, are kept in the
+ * image as they came, still encoded.
+ */
+bool keep_image(tinygltf::Image *img, const int, std::string *, std::string *,
+                int, int, const unsigned char *bytes, int size, void *)
 {
+	if (img->bufferView < 0 && bytes && size > 0)
+		img->image.assign(bytes, bytes + size);
 	return true;
 }
 
@@ -239,7 +246,7 @@ rad_status parse(const unsigned char *b, size_t len, bool glb,
 	tinygltf::TinyGLTF loader;
 	loader.SetFsCallbacks(tinygltf::FsCallbacks{
 	        fs_exists, fs_expand, fs_read, fs_write, &refusal});
-	loader.SetImageLoader(skip_image, nullptr);
+	loader.SetImageLoader(keep_image, nullptr);
 	std::string terr, twarn;
 	bool ok = glb ? loader.LoadBinaryFromMemory(&m, &terr, &twarn, b,
 	                                            (unsigned)len, "")
@@ -273,6 +280,56 @@ sio_doc_node view_node(const tinygltf::Node &n)
 	return c;
 }
 
+/* Member key of object v as n numbers into out; false if present but not
+ * that. */
+bool numbers(const tinygltf::Value &v, const char *key, double *out, size_t n)
+{
+	if (!v.Has(key))
+		return true;
+	const tinygltf::Value &m = v.Get(key);
+	if (n == 1) {
+		if (!m.IsNumber())
+			return false;
+		out[0] = m.GetNumberAsDouble();
+		return true;
+	}
+	if (!m.IsArray() || m.ArrayLen() != n)
+		return false;
+	for (size_t k = 0; k < n; k++) {
+		if (!m.Get((int)k).IsNumber())
+			return false;
+		out[k] = m.Get((int)k).GetNumberAsDouble();
+	}
+	return true;
+}
+
+/* The base colour texture and its KHR_texture_transform. */
+void view_base_texture(const tinygltf::TextureInfo &t, sio_doc_material &c)
+{
+	c.base_texture = t.index;
+	c.base_texcoord = t.texCoord;
+	c.scale[0] = c.scale[1] = 1;
+	c.transform_texcoord = -1;
+	auto ext = t.extensions.find(SIO_TRANSFORM_EXT);
+	if (ext == t.extensions.end())
+		return;
+	const tinygltf::Value &v = ext->second;
+	c.has_transform = 1;
+	if (!v.IsObject()) {
+		c.transform_bad = 1;
+		return;
+	}
+	double tc = -1;
+	bool ok = numbers(v, "offset", c.offset, 2) &&
+	          numbers(v, "rotation", &c.rotation, 1) &&
+	          numbers(v, "scale", c.scale, 2) &&
+	          numbers(v, "texCoord", &tc, 1);
+	if (!ok || !(tc >= -1 && tc <= 1e6) || tc != (int)tc)
+		c.transform_bad = 1;
+	else
+		c.transform_texcoord = (int)tc;
+}
+
 sio_doc_material view_material(const tinygltf::Material &mat)
 {
 	const tinygltf::PbrMetallicRoughness &pbr = mat.pbrMetallicRoughness;
@@ -289,6 +346,7 @@ sio_doc_material view_material(const tinygltf::Material &mat)
 	             (mat.normalTexture.index >= 0) +
 	             (mat.occlusionTexture.index >= 0) +
 	             (mat.emissiveTexture.index >= 0);
+	view_base_texture(pbr.baseColorTexture, c);
 	return c;
 }
 
@@ -315,8 +373,22 @@ void view_meshes(const tinygltf::Model &m, unsigned char **p, sio_doc &d,
 		        for (const tinygltf::Primitive &gp : mesh.primitives) {
 			        auto pos = gp.attributes.find("POSITION");
 			        bool has = pos != gp.attributes.end();
-			        *prim++ = {gp.mode, has, has ? pos->second : -1,
-			                   gp.indices, gp.material};
+			        sio_doc_prim cp = {gp.mode,
+			                           has,
+			                           has ? pos->second : -1,
+			                           gp.indices,
+			                           gp.material,
+			                           {}};
+			        for (int k = 0; k < SIO_TEXCOORDS; k++) {
+				        auto uv = gp.attributes.find(
+				                "TEXCOORD_" +
+				                std::to_string(k));
+				        cp.texcoord[k] =
+				                uv != gp.attributes.end()
+				                        ? uv->second
+				                        : -1;
+			        }
+			        *prim++ = cp;
 		        }
 		        return c;
 	        });
@@ -336,6 +408,9 @@ void view(sio_doc_owner &o)
 	             span(m.bufferViews.size() * sizeof(sio_doc_view)) +
 	             span(m.buffers.size() * sizeof(sio_doc_buffer)) +
 	             span(m.materials.size() * sizeof(sio_doc_material)) +
+	             span(m.textures.size() * sizeof(sio_doc_texture)) +
+	             span(m.samplers.size() * sizeof(sio_doc_sampler)) +
+	             span(m.images.size() * sizeof(sio_doc_image)) +
 	             span(m.lights.size() * sizeof(sio_doc_light)) +
 	             span(m.scenes.size() * sizeof(sio_doc_scene)) +
 	             span(m.extensionsRequired.size() * sizeof(sio_str));
@@ -349,10 +424,10 @@ void view(sio_doc_owner &o)
 	d.accessors = mirror<sio_doc_accessor>(
 	        &p, m.accessors, &d.naccessors,
 	        [](const tinygltf::Accessor &x) {
-		        return sio_doc_accessor{
-		                x.sparse.isSparse, x.bufferView,
-		                x.componentType,   x.type,
-		                x.count,           x.byteOffset};
+		        return sio_doc_accessor{x.sparse.isSparse, x.bufferView,
+		                                x.componentType,   x.type,
+		                                x.normalized,      x.count,
+		                                x.byteOffset};
 	        });
 	d.views = mirror<sio_doc_view>(
 	        &p, m.bufferViews, &d.nviews,
@@ -366,6 +441,26 @@ void view(sio_doc_owner &o)
 	        });
 	d.materials = mirror<sio_doc_material>(&p, m.materials, &d.nmaterials,
 	                                       view_material);
+	d.textures = mirror<sio_doc_texture>(
+	        &p, m.textures, &d.ntextures, [](const tinygltf::Texture &t) {
+		        return sio_doc_texture{t.source, t.sampler};
+	        });
+	d.samplers = mirror<sio_doc_sampler>(
+	        &p, m.samplers, &d.nsamplers, [](const tinygltf::Sampler &x) {
+		        return sio_doc_sampler{x.wrapS, x.wrapT};
+	        });
+	d.images = mirror<sio_doc_image>(
+	        &p, m.images, &d.nimages, [](const tinygltf::Image &x) {
+		        bool data = x.bufferView < 0 && !x.image.empty();
+		        return sio_doc_image{
+		                str(x.name),
+		                str(x.mimeType),
+		                x.bufferView,
+		                data ? x.image.data() : nullptr,
+		                data ? x.image.size() : 0,
+		                x.bufferView < 0 && !data && !x.uri.empty() &&
+		                        x.uri.rfind("data:", 0) != 0};
+	        });
 	d.lights = mirror<sio_doc_light>(
 	        &p, m.lights, &d.nlights, [](const tinygltf::Light &l) {
 		        return sio_doc_light{

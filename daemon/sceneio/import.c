@@ -10,13 +10,8 @@
  *    mirroring world transform swaps two corners so the front stays on
  *    the geometric side.  Non-finite and degenerate triangles are passed
  *    through: the builder skips and counts them.
- *  - Materials: reflectance is baseColorFactor (linear RGB), whatever
- *    metallicFactor says (metals become diffuse reflectors: the engine has
- *    no specular transport); textures and alpha are ignored.  Reflectance
- *    is clamped to MAX_REFLECTANCE because rho = 1 in a closed room makes
- *    I - rho F singular.  Luminance is emissiveFactor x
- *    KHR_materials_emissive_strength (cd/m2).  Each glTF material is
- *    offered to the builder once, when a primitive first uses it.
+ *  - Materials are material.c's: a textured one gives each triangle its
+ *    own reflectance, which goes to the builder beside the triangle.
  *  - Pure grouping nodes are not checked: their transform only matters
  *    through descendants, which are.
  */
@@ -27,24 +22,12 @@
 
 #include "internal.h"
 
-#define MAX_REFLECTANCE 0.999 /* see the DESIGN note */
-#define BATCH_TRIANGLES 1024  /* per rad_scene_add_triangles call */
+#define BATCH_TRIANGLES 1024 /* per rad_scene_add_triangles call */
 
 static rad_status nomem(const sio_import *im)
 {
 	return rad_fail(im->err, RAD_ERR_NOMEM,
 	                "out of memory while importing glTF");
-}
-
-/* Put the glTF object's name in front of a builder message about it. */
-static rad_status blame(rad_error *err, rad_status st, const char *label)
-{
-	if (st != RAD_OK && err) {
-		char msg[sizeof err->msg];
-		memcpy(msg, err->msg, sizeof msg);
-		rad_fail(err, st, "%s: %s", label, msg);
-	}
-	return st;
 }
 
 /* A node that places geometry or a light needs a usable world matrix. */
@@ -70,81 +53,6 @@ static rad_status check_world(const sio_import *im, int ni, const sio_mat4 *w)
 	return RAD_OK;
 }
 
-/* --------------------------------------------------------- materials */
-
-/* Reflectance and luminance of glTF material mi (>= 0), unclamped. */
-static rad_status material_values(const sio_import *im, int mi,
-                                  const char *label, double rho[3],
-                                  double lum[3])
-{
-	const sio_doc_material *mat = &im->d->materials[mi];
-	double strength = 1; /* KHR_materials_emissive_strength's default */
-	sio_val tag;
-	rad_status st =
-	        sio_doc_material_strength(im->d, mi, &tag, &strength, im->err);
-	if (st != RAD_OK)
-		return st;
-	if (tag != SIO_VAL_ABSENT &&
-	    (tag != SIO_VAL_NUMBER || !(strength >= 0)))
-		return rad_fail(im->err, RAD_ERR_INVALID,
-		                "%s: %s.emissiveStrength must be a number >= 0",
-		                label, SIO_STRENGTH_EXT);
-	for (int c = 0; c < 3; c++) {
-		if (!(mat->base_color[c] >= 0) || !(mat->emissive[c] >= 0))
-			return rad_fail(im->err, RAD_ERR_INVALID,
-			                "%s: negative baseColorFactor or "
-			                "emissiveFactor",
-			                label);
-		rho[c] = mat->base_color[c];
-		lum[c] = mat->emissive[c] * strength;
-	}
-	return RAD_OK;
-}
-
-/* Engine material id of glTF material mi (-1: the glTF default). */
-static rad_status material_id(sio_import *im, int mi, const char *where,
-                              uint32_t *id)
-{
-	if (mi < -1 || mi >= (int64_t)im->d->nmaterials)
-		return rad_fail(im->err, RAD_ERR_INVALID,
-		                "%s: material %d out of range (%zu materials)",
-		                where, mi, im->d->nmaterials);
-	int64_t *slot = &im->mat_ids[mi + 1];
-	if (*slot >= 0) {
-		*id = (uint32_t)*slot;
-		return RAD_OK;
-	}
-	char label[192];
-	double rho[3] = {1, 1, 1}, lum[3] = {0, 0, 0}; /* glTF default */
-	if (mi < 0) {
-		snprintf(label, sizeof label, "default material");
-	} else {
-		snprintf(label, sizeof label, "material %d '%s'", mi,
-		         im->d->materials[mi].name.s);
-		rad_status st = material_values(im, mi, label, rho, lum);
-		if (st != RAD_OK)
-			return st;
-	}
-	int clamped = 0;
-	for (int c = 0; c < 3; c++)
-		if (rho[c] > MAX_REFLECTANCE) {
-			rho[c] = MAX_REFLECTANCE;
-			clamped = 1;
-		}
-	if (clamped)
-		sio_note(im->info, "%s: reflectance clamped to %g", label,
-		         MAX_REFLECTANCE);
-	uint32_t u;
-	rad_status st = blame(
-	        im->err, rad_scene_add_material(im->s, rho, lum, &u, im->err),
-	        label);
-	if (st != RAD_OK)
-		return st;
-	*slot = u;
-	*id = u;
-	return RAD_OK;
-}
-
 /* ------------------------------------------------------------- meshes */
 
 /* One primitive's geometry. */
@@ -156,6 +64,7 @@ typedef struct prim {
 	const sio_view *idx; /* NULL when not indexed */
 	int flip;            /* the world matrix mirrors: swap corners */
 	uint32_t mat, node;  /* engine ids */
+	sio_prim_tex tex;    /* tex.tex NULL: the material's reflectance */
 } prim;
 
 /* Read POSITION and transform it to world space: *out malloc'ed. */
@@ -192,13 +101,17 @@ static void corners(int mode, size_t t, size_t c[3])
 	}
 }
 
-static rad_status flush(sio_import *im, uint32_t mat, uint32_t node)
+static rad_status flush(sio_import *im, const prim *p)
 {
 	size_t n = im->nbatch / 9;
 	if (n == 0)
 		return RAD_OK;
 	im->nbatch = 0;
-	return rad_scene_add_triangles(im->s, mat, node, im->batch, n, im->err);
+	if (p->tex.tex)
+		return rad_scene_add_triangles_rho(
+		        im->s, p->mat, p->node, im->batch, im->rho, n, im->err);
+	return rad_scene_add_triangles(im->s, p->mat, p->node, im->batch, n,
+	                               im->err);
 }
 
 /* How many triangles the primitive makes, checked. */
@@ -246,18 +159,23 @@ static rad_status emit_triangles(sio_import *im, const prim *p)
 			v[1] = v[2];
 			v[2] = tmp;
 		}
+		if (p->tex.tex) {
+			sio_material_rho(&p->tex, v, im->rho + im->nbatch / 3);
+			if (im->info)
+				im->info->textured_triangles++;
+		}
 		for (int k = 0; k < 3; k++) {
 			memcpy(im->batch + im->nbatch, p->pos + 3 * v[k],
 			       3 * sizeof(double));
 			im->nbatch += 3;
 		}
 		if (im->nbatch == 9 * BATCH_TRIANGLES) {
-			st = flush(im, p->mat, p->node);
+			st = flush(im, p);
 			if (st != RAD_OK)
 				return st;
 		}
 	}
-	return flush(im, p->mat, p->node);
+	return flush(im, p);
 }
 
 static rad_status add_primitive(sio_import *im, int mi, size_t pi,
@@ -279,7 +197,8 @@ static rad_status add_primitive(sio_import *im, int mi, size_t pi,
 	if (!gp->has_position)
 		return rad_fail(im->err, RAD_ERR_INVALID,
 		                "%s: no POSITION attribute", where);
-	prim p = {where, gp->mode, NULL, 0, NULL, sio_mat_det3(w) < 0, 0, node};
+	prim p = {where, gp->mode, NULL, 0, NULL, sio_mat_det3(w) < 0,
+	          0,     node,     {0}};
 	sio_view view, idx;
 	double *pos = NULL;
 	rad_status st =
@@ -294,7 +213,9 @@ static rad_status add_primitive(sio_import *im, int mi, size_t pi,
 		p.idx = &idx;
 	}
 	if (st == RAD_OK)
-		st = material_id(im, gp->material, where, &p.mat);
+		st = sio_material_id(im, gp->material, where, &p.mat);
+	if (st == RAD_OK)
+		st = sio_material_texture(im, gp->material, where, gp, &p.tex);
 	if (st == RAD_OK)
 		st = emit_triangles(im, &p);
 	if (st == RAD_OK && im->info)
@@ -409,7 +330,8 @@ static rad_status add_light(sio_import *im, int ni, int li, const sio_mat4 *w)
 	char label[192];
 	snprintf(label, sizeof label, "node %d '%s'", ni,
 	         sio_node_name(im->d, ni));
-	return blame(im->err, rad_scene_add_light(im->s, &d, im->err), label);
+	return sio_blame(im->err, rad_scene_add_light(im->s, &d, im->err),
+	                 label);
 }
 
 /* ---------------------------------------------------------- the import */
@@ -423,9 +345,16 @@ rad_status sio_import_init(sio_import *im, const sio_doc *d, rad_scene *s,
 	im->info = info;
 	im->err = err;
 	im->mat_ids = malloc((d->nmaterials + 1) * sizeof(*im->mat_ids));
+	im->mat_tex = calloc(d->nmaterials + 1, sizeof(*im->mat_tex));
+	im->tex_used = calloc(d->nmaterials + 1, 1);
 	im->batch = malloc(9 * BATCH_TRIANGLES * sizeof(*im->batch));
-	if (!im->mat_ids || !im->batch)
+	im->rho = malloc(3 * BATCH_TRIANGLES * sizeof(*im->rho));
+	if (!im->mat_ids || !im->mat_tex || !im->tex_used || !im->batch ||
+	    !im->rho)
 		return nomem(im);
+	rad_status st = sio_tex_cache_init(&im->tex, d, info, err);
+	if (st != RAD_OK)
+		return st;
 	for (size_t k = 0; k <= d->nmaterials; k++)
 		im->mat_ids[k] = -1;
 	return RAD_OK;
@@ -451,6 +380,10 @@ rad_status sio_import_node(void *ud, int ni, const sio_mat4 *w)
 
 void sio_import_done(sio_import *im)
 {
+	sio_tex_cache_free(&im->tex);
+	free(im->rho);
 	free(im->batch);
+	free(im->tex_used);
+	free(im->mat_tex);
 	free(im->mat_ids);
 }

@@ -34,10 +34,13 @@ static inline int sio_str_is(sio_str s, const char *lit)
 	return s.len == strlen(lit) && memcmp(s.s, lit, s.len) == 0;
 }
 
-/* load.c: append a warning to info->warnings ("; "-separated, truncated;
+/* info.c: append a warning to info->warnings ("; "-separated, truncated;
  * info may be NULL). */
 void sio_note(sio_info *info, const char *fmt, ...)
         __attribute__((format(printf, 2, 3)));
+/* info.c: put label (the glTF object) in front of err's message when st
+ * is an error; returns st. */
+rad_status sio_blame(rad_error *err, rad_status st, const char *label);
 
 /* precheck.c: refuse what tinygltf must not see; *glb says which parser
  * the bytes are for. */
@@ -86,20 +89,88 @@ rad_status sio_index_view(const sio_doc *d, const char *where, int ai,
                           sio_view *v, rad_error *err);
 /* Element k of an index view. */
 size_t sio_index_at(const sio_view *v, size_t k);
+/* TEXCOORD accessor ai (VEC2 of FLOAT, or normalized unsigned byte or
+ * short) and its element k. */
+rad_status sio_uv_view(const sio_doc *d, const char *where, int ai, sio_view *v,
+                       rad_error *err);
+void sio_uv_at(const sio_view *v, size_t k, double uv[2]);
+/* The bytes of bufferView vi (an image's), checked against its buffer. */
+rad_status sio_view_bytes(const sio_doc *d, const char *where, int vi,
+                          const unsigned char **p, size_t *len, rad_error *err);
+
+/* --------------------------------------------------------- texture.c */
+
+/* An image ready for means: linear RGB, a pyramid of prefix sums. */
+typedef struct sio_texture sio_texture;
+
+/* The images of one import, decoded when first needed (texture.c). */
+typedef struct sio_tex_cache {
+	const sio_doc *d;
+	sio_info *info;
+	struct sio_tex_slot *slot; /* one per glTF image */
+	size_t bytes;              /* held by the prepared images */
+	uint64_t clock;
+} sio_tex_cache;
+
+rad_status sio_tex_cache_init(sio_tex_cache *c, const sio_doc *d,
+                              sio_info *info, rad_error *err);
+void sio_tex_cache_free(sio_tex_cache *c);
+/* Image ii (in range) prepared, *out NULL when it cannot be read (a note
+ * says why, once).  Fails only for want of memory. */
+rad_status sio_tex_image(sio_tex_cache *c, int ii, const sio_texture **out,
+                         rad_error *err);
+/* Mean linear RGB of t over the triangle uv (glTF UVs: one image per unit,
+ * v down), wrap[0] along u and wrap[1] along v (SIO_GL_REPEAT...). */
+void sio_tex_mean(const sio_texture *t, const int wrap[2],
+                  const double uv[3][2], double rgb[3]);
+/* Mean linear RGB of the whole image. */
+void sio_tex_image_mean(const sio_texture *t, double rgb[3]);
 
 /* ---------------------------------------------------------- import.c */
+
+/* A material's base colour texture, bound (material.c). */
+typedef struct sio_mat_tex {
+	int image;        /* -1: none, or not to be read */
+	int wrap[2];      /* along u, v: SIO_GL_REPEAT... */
+	int texcoord;     /* the UV set, n of TEXCOORD_n */
+	double m[6];      /* KHR_texture_transform: u' = m0 u + m1 v + m2,
+	                     v' = m3 u + m4 v + m5 */
+	double factor[3]; /* baseColorFactor RGB */
+} sio_mat_tex;
+
+/* A primitive's view of its material's texture. */
+typedef struct sio_prim_tex {
+	const sio_mat_tex *mat;
+	const sio_texture *tex; /* NULL: the material's factor alone */
+	sio_view uv;            /* its TEXCOORD accessor */
+} sio_prim_tex;
 
 /* One import into an engine scene, node by node. */
 typedef struct sio_import {
 	const sio_doc *d;
 	rad_scene *s;
-	sio_info *info;     /* may be NULL */
-	rad_error *err;     /* may be NULL */
-	int64_t *mat_ids;   /* [glTF material + 1]: scene id, or -1 */
-	double *batch;      /* triangles waiting for the builder */
-	size_t nbatch;      /* doubles in batch (9 per triangle) */
-	uint64_t triangles; /* offered so far (the engine counts 32-bit) */
+	sio_info *info;          /* may be NULL */
+	rad_error *err;          /* may be NULL */
+	int64_t *mat_ids;        /* [glTF material + 1]: scene id, or -1 */
+	sio_mat_tex *mat_tex;    /* [glTF material + 1], set with mat_ids */
+	unsigned char *tex_used; /* [glTF material + 1]: texture counted */
+	sio_tex_cache tex;       /* the images decoded so far */
+	double *batch;           /* triangles waiting for the builder */
+	double *rho;             /* their reflectances, when textured */
+	size_t nbatch;           /* doubles in batch (9 per triangle) */
+	uint64_t triangles;      /* offered so far (the engine counts 32-bit) */
 } sio_import;
+
+/* material.c: the engine id of glTF material mi (-1: glTF's default),
+ * offered to the builder and its texture bound on first use. */
+rad_status sio_material_id(sio_import *im, int mi, const char *where,
+                           uint32_t *id);
+/* The texture of material mi (already offered) as primitive gp reads it;
+ * pt->tex NULL when the primitive gets the factor alone. */
+rad_status sio_material_texture(sio_import *im, int mi, const char *where,
+                                const sio_doc_prim *gp, sio_prim_tex *pt);
+/* Reflectance of the triangle of vertices v under a textured pt. */
+void sio_material_rho(const sio_prim_tex *pt, const size_t v[3], double rho[3]);
 
 rad_status sio_import_init(sio_import *im, const sio_doc *d, rad_scene *s,
                            sio_info *info, rad_error *err);

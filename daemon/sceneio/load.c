@@ -35,7 +35,8 @@ static rad_status check_required(const sio_doc *d, rad_error *err)
 	for (size_t k = 0; k < d->nrequired; k++) {
 		sio_str ext = d->required[k];
 		if (!sio_str_is(ext, SIO_LIGHTS_EXT) &&
-		    !sio_str_is(ext, SIO_STRENGTH_EXT))
+		    !sio_str_is(ext, SIO_STRENGTH_EXT) &&
+		    !sio_str_is(ext, SIO_TRANSFORM_EXT))
 			return rad_fail(err, RAD_ERR_UNSUPPORTED,
 			                "extensionsRequired: '%s' is not "
 			                "supported",
@@ -91,6 +92,7 @@ static rad_status build(const sio_doc *d, rad_scene *s, sio_sensor_set *ss,
 	if (st == RAD_OK)
 		st = sio_walk(d, visit, &p, err);
 	if (s) {
+		sio_tex_cache_free(&im.tex); /* before the BVH is built */
 		if (st == RAD_OK)
 			st = rad_scene_commit(s, err);
 		sio_import_done(&im);

@@ -34,7 +34,14 @@ extern "C" {
 typedef struct sio_info {
 	uint32_t meshes, primitives, nodes;
 	uint32_t primitives_skipped; /* non-triangle modes (points, lines) */
-	uint32_t textures_ignored;   /* baseColorTexture etc. present */
+	uint32_t textures_ignored;   /* texture references not used: normal,
+	                                occlusion, metallic-roughness,
+	                                emissive, unreadable base colours */
+	uint32_t textures_read;      /* materials whose reflectance comes from
+	                                their base colour texture */
+	uint32_t images_decoded;     /* image decodes (once each, unless the
+	                                memory budget evicted one) */
+	uint32_t textured_triangles; /* triangles given a texture's mean */
 	uint32_t metallic_materials; /* metallicFactor > 0 (treated diffuse) */
 	char warnings[512];          /* tinygltf warnings, truncated */
 } sio_info;

@@ -327,6 +327,85 @@ static void test_materials_default_clamp_and_counters(void **state)
 	free(doc);
 }
 
+/* A 2 x 2 grey PNG (128: 0.2158605 linear), as a data: URI. */
+#define GREY_PNG                                                               \
+	"data:image/png;base64,iVBORw0KGgoAAAANSUhEUgAAAAIAAAACCAIAAAD91Jpz"   \
+	"AAAAFklEQVR4nGNsaGhgYGBgYmBgYGBgAAASKgGEzwCOrgAAAABJRU5ErkJggg=="
+
+/* The quad's material given a base colour texture, with its pieces. */
+static char *textured_doc(const char *texinfo, const char *images,
+                          const char *extra)
+{
+	char buf[1024];
+	snprintf(buf, sizeof buf,
+	         "\"pbrMetallicRoughness\":{\"baseColorTexture\":%s,", texinfo);
+	char *doc = subst(quad_doc(), "\"pbrMetallicRoughness\":{", buf);
+	snprintf(buf, sizeof buf,
+	         "\"textures\":[{\"source\":0%s}],"
+	         "\"images\":[%s],\"materials\":[",
+	         extra, images);
+	return subst(doc, "\"materials\":[", buf);
+}
+
+static void test_textures_read_or_explained(void **state)
+{
+	(void)state;
+	/* Refused: what the document gets wrong. */
+	static const struct {
+		const char *texinfo, *images, *extra, *part;
+	} bad[] = {
+	        {"{\"index\":3}", "{\"uri\":\"" GREY_PNG "\"}", "",
+	         "baseColorTexture 3 out of range"},
+	        {"{\"index\":0}", "{\"uri\":\"" GREY_PNG "\"}",
+	         ",\"sampler\":2", "sampler 2 out of range"},
+	        {"{\"index\":0,\"extensions\":{\"KHR_texture_transform\":"
+	         "{\"scale\":\"big\"}}}",
+	         "{\"uri\":\"" GREY_PNG "\"}", "", "KHR_texture_transform"},
+	};
+	for (size_t k = 0; k < sizeof bad / sizeof bad[0]; k++) {
+		char *doc = textured_doc(bad[k].texinfo, bad[k].images,
+		                         bad[k].extra);
+		expect_fail(doc, strlen(doc), RAD_ERR_INVALID, bad[k].part);
+		free(doc);
+	}
+	/* Read as the factor alone, with a note: what cannot be used. */
+	static const struct {
+		const char *images, *note;
+	} unread[] = {
+	        {"{\"uri\":\"" GREY_PNG "\"}", "lacks"}, /* no TEXCOORD_0 */
+	        {"{\"uri\":\"grey.png\"}", "external file not read"},
+	        {"{\"uri\":\"data:image/png;base64,AAAA\"}",
+	         "neither PNG nor JPEG"},
+	};
+	for (size_t k = 0; k < sizeof unread / sizeof unread[0]; k++) {
+		char *doc = textured_doc("{\"index\":0}", unread[k].images, "");
+		sio_info info;
+		rad_scene *s = load_ok(doc, strlen(doc), &info);
+		const rad_material *m = &s->mats[poly0(s)->mat];
+		assert_float_equal(m->rho[0], 0.5, 1e-6);
+		if (!strstr(info.warnings, unread[k].note))
+			fail_msg("case %zu: %s", k, info.warnings);
+		assert_int_equal(info.textures_read, 0);
+		assert_int_equal(info.textures_ignored, 1);
+		rad_scene_free(s);
+		free(doc);
+	}
+	/* Required KHR_texture_transform is understood; others are not. */
+	char *doc =
+	        textured_doc("{\"index\":0}", "{\"uri\":\"" GREY_PNG "\"}", "");
+	char *req = subst(strdup(doc), "\"asset\":",
+	                  "\"extensionsRequired\":[\"KHR_texture_transform\"],"
+	                  "\"asset\":");
+	rad_scene_free(load_ok(req, strlen(req), NULL));
+	free(req);
+	req = subst(doc, "\"asset\":",
+	            "\"extensionsRequired\":[\"KHR_draco_mesh_compression\"],"
+	            "\"asset\":");
+	expect_fail(req, strlen(req), RAD_ERR_UNSUPPORTED,
+	            "KHR_draco_mesh_compression");
+	free(req);
+}
+
 static void test_nan_and_degenerate_triangles_are_counted(void **state)
 {
 	(void)state;
@@ -848,6 +927,7 @@ int main(void)
 	        cmocka_unit_test(test_nested_trs_and_matrix_transforms),
 	        cmocka_unit_test(test_mirroring_keeps_the_front_side),
 	        cmocka_unit_test(test_materials_default_clamp_and_counters),
+	        cmocka_unit_test(test_textures_read_or_explained),
 	        cmocka_unit_test(test_nan_and_degenerate_triangles_are_counted),
 	        cmocka_unit_test(test_punctual_lights_are_placed_and_aimed),
 	        cmocka_unit_test(test_bad_lights_are_refused_by_name),

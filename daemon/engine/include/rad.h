@@ -172,6 +172,20 @@ rad_status rad_scene_add_triangles(rad_scene *s, uint32_t material,
                                    uint32_t node, const double *xyz,
                                    size_t ntri, rad_error *err);
 
+/*
+ * As rad_scene_add_triangles, each triangle with its own reflectance (3
+ * per triangle, each in [0, 1)) in place of the material's, which still
+ * gives the luminance: a textured surface, where each polygon reflects
+ * the mean of its texture.  Triangles offered together under one material
+ * still merge into quads; a quad reflects the area-weighted mean of its
+ * two triangles'.  Materials are made per distinct reflectance and
+ * counted as any others.
+ */
+rad_status rad_scene_add_triangles_rho(rad_scene *s, uint32_t material,
+                                       uint32_t node, const double *xyz,
+                                       const double *rho, size_t ntri,
+                                       rad_error *err);
+
 rad_status rad_scene_add_light(rad_scene *s, const rad_light_desc *light,
                                rad_error *err);
 
@@ -186,6 +200,21 @@ void rad_scene_memory(const rad_scene *s, rad_mem_report *out);
 /* Axis-aligned bounds of the geometry and the lights, metres. */
 void rad_scene_bounds(const rad_scene *s, double lo[3], double hi[3]);
 void rad_scene_free(rad_scene *s);
+
+/* A committed scene's polygon as stored: what the solvers see. */
+typedef struct rad_polygon_desc {
+	double corners[4][3]; /* counter-clockwise seen from the front */
+	int ncorners;         /* 3, or 4 for a parallelogram */
+	double normal[3];     /* unit, front side */
+	double area;          /* m2 */
+	uint32_t node;        /* rad_scene_node_name() */
+	double reflectance[3];
+	double luminance[3]; /* cd/m2 */
+} rad_polygon_desc;
+
+/* Polygon i, i < rad_scene_counts.polygons, of a committed scene. */
+rad_status rad_scene_polygon_get(const rad_scene *s, uint32_t i,
+                                 rad_polygon_desc *out, rad_error *err);
 
 /* ----------------------------------------------------------------- solver */
 

@@ -139,6 +139,14 @@ json_t *srv_scene_json(const srv_scene *sc)
 	COUNT_(emitters)
 	COUNT_(nodes)
 #undef COUNT_
+	json_t *tex = json_object();
+	json_object_set_new(tex, "read", json_integer(sc->info.textures_read));
+	json_object_set_new(tex, "images_decoded",
+	                    json_integer(sc->info.images_decoded));
+	json_object_set_new(tex, "textured_triangles",
+	                    json_integer(sc->info.textured_triangles));
+	json_object_set_new(tex, "ignored",
+	                    json_integer(sc->info.textures_ignored));
 	json_object_set_new(bounds, "min", vec3(sc->lo));
 	json_object_set_new(bounds, "max", vec3(sc->hi));
 	warnings_text(sc, warn, sizeof(warn));
@@ -149,6 +157,7 @@ json_t *srv_scene_json(const srv_scene *sc)
 	                    json_integer((json_int_t)sc->bytes));
 	json_object_set_new(o, "counts", counts);
 	json_object_set_new(o, "bounds", bounds);
+	json_object_set_new(o, "textures", tex);
 	json_object_set_new(o, "memory_bytes", json_integer(sc->mem.total));
 	json_object_set_new(o, "warnings", json_string(warn));
 	return o;
