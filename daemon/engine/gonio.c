@@ -238,8 +238,9 @@ double rad_gonio_factor(const rad_gonio *t, v3 w)
 		return 0;
 	double cg = v3_dot(w, v3_d(t->nadir));
 	double gamma = acos(cg > 1 ? 1 : cg < -1 ? -1 : cg) / DEG;
-	double c =
-	        atan2(v3_dot(w, v3_d(t->axis90)), v3_dot(w, v3_d(t->axis0))) /
-	        DEG;
+	/* + 0.0 turns a -0 into +0: straight down reads plane 0, not 180. */
+	double y = v3_dot(w, v3_d(t->axis90)) + 0.0;
+	double x = v3_dot(w, v3_d(t->axis0)) + 0.0;
+	double c = atan2(y, x) / DEG;
 	return rad_candela_at(&t->grid, c, gamma) / t->peak_cd;
 }

@@ -93,12 +93,14 @@ size_t sio_index_at(const sio_view *v, size_t k);
 typedef struct sio_import {
 	const sio_doc *d;
 	rad_scene *s;
-	sio_info *info;     /* may be NULL */
-	rad_error *err;     /* may be NULL */
-	int64_t *mat_ids;   /* [glTF material + 1]: scene id, or -1 */
-	double *batch;      /* triangles waiting for the builder */
-	size_t nbatch;      /* doubles in batch (9 per triangle) */
-	uint64_t triangles; /* offered so far (the engine counts 32-bit) */
+	sio_info *info;      /* may be NULL */
+	rad_error *err;      /* may be NULL */
+	int64_t *mat_ids;    /* [glTF material + 1]: scene id, or -1 */
+	double *batch;       /* triangles waiting for the builder */
+	size_t nbatch;       /* doubles in batch (9 per triangle) */
+	uint64_t triangles;  /* offered so far (the engine counts 32-bit) */
+	sio_light_hook hook; /* may be NULL */
+	void *hook_ud;
 } sio_import;
 
 rad_status sio_import_init(sio_import *im, const sio_doc *d, rad_scene *s,
