@@ -40,6 +40,7 @@ enum { EXIT_OKAY = 0, EXIT_FAIL = 1, EXIT_USAGE = 2 };
 typedef struct cli_args {
 	const char *scene_path;
 	const char *points_path;
+	tool_luminaires luminaires; /* --luminaire NAME=FILE */
 	rad_ref_options opt;
 	int samples_given;     /* --samples seen */
 	int target_given;      /* --target-error seen */
@@ -49,12 +50,13 @@ typedef struct cli_args {
 } cli_args;
 
 typedef enum opt_kind {
-	OPT_HELP,    /* --help */
-	OPT_FLAG_ON, /* int field := 1 */
-	OPT_DOUBLE,  /* double field, finite, within (lo, hi) */
-	OPT_INT,     /* int field, within [lo, hi] */
-	OPT_U64,     /* uint64_t field, within [lo, hi] */
-	OPT_STRING,  /* const char * field */
+	OPT_HELP,      /* --help */
+	OPT_FLAG_ON,   /* int field := 1 */
+	OPT_DOUBLE,    /* double field, finite, within (lo, hi) */
+	OPT_INT,       /* int field, within [lo, hi] */
+	OPT_U64,       /* uint64_t field, within [lo, hi] */
+	OPT_STRING,    /* const char * field */
+	OPT_LUMINAIRE, /* tool_luminaires field: one more NAME=FILE */
 } opt_kind;
 
 typedef struct cli_option {
@@ -73,6 +75,8 @@ typedef struct cli_option {
 static const cli_option cli_options[] = {
         {"points", "FILE", OPT_STRING, ARG(points_path), 0, 0, 0,
          "estimate illuminance at the points in FILE (required)"},
+        {"luminaire", "NAME=FILE", OPT_LUMINAIRE, ARG(luminaires), 0, 0, 0,
+         "light NAME shines with the IES/EULUMDAT FILE (repeatable)"},
         {"samples", "N", OPT_U64, OPT(samples), ARG(samples_given), 1,
          MAX_PATHS_OPT, "exactly N paths per point (excludes --target-error)"},
         {"target-error", "R", OPT_DOUBLE, OPT(target_error), ARG(target_given),
@@ -205,6 +209,9 @@ static int apply_value(const cli_option *o, const char *value, cli_args *a,
 	case OPT_STRING:
 		*(const char **)p = value;
 		return 0;
+	case OPT_LUMINAIRE:
+		return tool_luminaire_arg((tool_luminaires *)p, value, msg,
+		                          len);
 	case OPT_U64:
 		/* Every count fits JSON's (signed) integers. */
 		if (parse_u64(value, &u) != 0 || u > (uint64_t)INT64_MAX ||
@@ -460,8 +467,8 @@ int main(int argc, char **argv)
 	}
 	rc = tool_points_load(PROG, a.points_path, &pl.xyz, &pl.n);
 	if (rc == EXIT_OKAY)
-		rc = tool_scene_load(PROG, a.scene_path, &sc, &info,
-		                     &load_seconds);
+		rc = tool_scene_load(PROG, a.scene_path, &a.luminaires, &sc,
+		                     &info, &load_seconds);
 	if (rc == EXIT_OKAY)
 		rc = estimate_and_report(&a, sc, &info, &pl, load_seconds);
 	rad_scene_free(sc);

@@ -487,8 +487,8 @@ int main(int argc, char **argv)
 	if (a.points_path)
 		rc = tool_points_load(PROG, a.points_path, &pl.xyz, &pl.n);
 	if (rc == EXIT_OKAY)
-		rc = tool_scene_load(PROG, a.scene_path, &sc, &info,
-		                     &load_seconds);
+		rc = tool_scene_load(PROG, a.scene_path, &a.luminaires, &sc,
+		                     &info, &load_seconds);
 	if (rc == EXIT_OKAY && a.polygons_path)
 		rc = write_polygons(a.polygons_path, sc);
 	if (rc == EXIT_OKAY)

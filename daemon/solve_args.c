@@ -25,11 +25,12 @@
 
 /* The tool's own options. */
 typedef enum tool_kind {
-	T_HELP,   /* --help */
-	T_FLAG,   /* int field := 1 */
-	T_U32,    /* uint32_t field, 1..1e9 */
-	T_STRING, /* const char * field */
-	T_SOLVER, /* rad_solver_kind field */
+	T_HELP,      /* --help */
+	T_FLAG,      /* int field := 1 */
+	T_U32,       /* uint32_t field, 1..1e9 */
+	T_STRING,    /* const char * field */
+	T_LUMINAIRE, /* tool_luminaires field: one more NAME=FILE */
+	T_SOLVER,    /* rad_solver_kind field */
 } tool_kind;
 
 typedef struct tool_option {
@@ -50,6 +51,8 @@ static const tool_option tool_options[] = {
          "run exactly N iterations (excludes --tol, --max-iterations)"},
         {"points", "FILE", T_STRING, ARG(points_path),
          "query illuminance at the points in FILE"},
+        {"luminaire", "NAME=FILE", T_LUMINAIRE, ARG(luminaires),
+         "light NAME shines with the IES/EULUMDAT FILE (repeatable)"},
         {"export", "FILE", T_STRING, ARG(export_path),
          "write the solved mesh to FILE (.glb; .gltf for JSON)"},
         {"polygons", "FILE", T_STRING, ARG(polygons_path),
@@ -184,6 +187,9 @@ static int tool_set(const tool_option *o, const char *value, cli_args *a,
 	case T_STRING:
 		*(const char **)p = value;
 		return EXIT_OKAY;
+	case T_LUMINAIRE:
+		return tool_luminaire_arg((tool_luminaires *)p, value, msg,
+		                          len);
 	case T_SOLVER:
 		if (rad_solver_kind_parse(value, (rad_solver_kind *)p) !=
 		    RAD_OK)

@@ -8,18 +8,20 @@
 #include <stdint.h>
 
 #include "rad.h"
+#include "tool.h"
 
 enum { EXIT_OKAY = 0, EXIT_SOLVE = 1, EXIT_USAGE = 2 };
 
 typedef struct cli_args {
 	const char *scene_path;
-	const char *points_path;   /* NULL: no illuminance queries */
-	const char *export_path;   /* NULL: no solved-mesh export */
-	const char *polygons_path; /* NULL: no polygon table */
-	rad_options opt;           /* every engine option (rad.h's table) */
-	uint32_t iterations;       /* > 0: exactly this many steps */
-	int json;                  /* one JSON object on stdout */
-	int per_iteration;         /* a stats line on stderr after each step */
+	const char *points_path;    /* NULL: no illuminance queries */
+	const char *export_path;    /* NULL: no solved-mesh export */
+	const char *polygons_path;  /* NULL: no polygon table */
+	tool_luminaires luminaires; /* --luminaire NAME=FILE */
+	rad_options opt;            /* every engine option (rad.h's table) */
+	uint32_t iterations;        /* > 0: exactly this many steps */
+	int json;                   /* one JSON object on stdout */
+	int per_iteration;          /* a stats line on stderr after each step */
 	int help;
 	int given[RAD_NOPTIONS]; /* engine options seen on the line */
 	int reparse;             /* cli_parse's second pass (--accuracy) */

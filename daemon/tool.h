@@ -16,13 +16,36 @@
 enum { TOOL_OK = 0, TOOL_FAIL = 1, TOOL_USAGE = 2 };
 
 /*
- * Read a GLB, or a .gltf with the files beside it (packed:
- * sio_scene_read), into a committed scene; *seconds is the time the load
- * took (parse, build, BVH), the file read aside.  TOOL_OK, or TOOL_FAIL
- * after "PROG: why" on stderr.
+ * --luminaire NAME=FILE, repeatable: the light named NAME (its glTF node's
+ * name, or its KHR_lights_punctual name) shines with the candela table
+ * of the IES or EULUMDAT FILE.  The file's absolute candela replace the
+ * glTF intensity; the glTF colour is kept, scaled so its largest channel
+ * is 1 (white when the light is black).  The luminaire's nadir (gamma
+ * 0) is the light's direction, local -Z, and its C = 0 plane holds the
+ * node's local +X.  Every NAME must match a light.
  */
-int tool_scene_load(const char *prog, const char *path, rad_scene **sc,
-                    sio_info *info, double *seconds);
+#define TOOL_MAX_LUMINAIRES 64
+
+typedef struct tool_luminaires {
+	const char *spec[TOOL_MAX_LUMINAIRES]; /* "NAME=FILE", from argv */
+	int n;
+} tool_luminaires;
+
+/* Add one --luminaire value: 0, or RP_CLI_USAGE with the reason in msg
+ * when it is not NAME=FILE or there are too many. */
+int tool_luminaire_arg(tool_luminaires *l, const char *spec, char *msg,
+                       size_t len);
+
+/*
+ * Read a GLB, or a .gltf with the files beside it (packed:
+ * sio_scene_read), into a committed scene, with the luminaires in lum
+ * (NULL or empty for none); *seconds is the time the load took (parse,
+ * build, BVH), the files read aside.  TOOL_OK, or TOOL_FAIL after "PROG:
+ * why" on stderr.
+ */
+int tool_scene_load(const char *prog, const char *path,
+                    const tool_luminaires *lum, rad_scene **sc, sio_info *info,
+                    double *seconds);
 
 /*
  * Read a points file (rp_points_read): *xyz gets 6 doubles per point.

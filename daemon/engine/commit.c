@@ -359,6 +359,8 @@ static void compute_bounds(rad_scene *s)
 /*
  * Flux (lm) of one light, per unit intensity.  Used only to scale
  * refinement thresholds, so the range window is ignored (an upper bound).
+ * A point light with a table: the table's exact flux over its peak
+ * (gonio.c).
  * Spot: 2 pi int I(mu) dmu over the cone, exact for glTF's quadratic
  * falloff: (1 - ci) + (ci - co) / 3.  Directional: the scene's bounding
  * box intercepts E x its projected area |d.x| Ly Lz + |d.y| Lx Lz + ...
@@ -367,7 +369,7 @@ static double light_flux_per_unit(const rad_scene *s, const rad_light *L)
 {
 	switch (L->kind) {
 	case RAD_LIGHT_POINT:
-		return 4.0 * M_PI;
+		return L->gonio ? L->gonio->flux_per_peak : 4.0 * M_PI;
 	case RAD_LIGHT_SPOT:
 		return 2.0 * M_PI *
 		       ((1.0 - L->cos_inner) +
@@ -445,8 +447,10 @@ void rad_scene_free(rad_scene *s)
 	rad_mem_free(&s->mem, RAD_MEM_GEOMETRY, s->stage_base);
 	rad_mem_free(&s->mem, RAD_MEM_MATERIALS, s->mats);
 	rad_scene_material_index_free(s);
-	for (uint32_t i = 0; i < s->nlights; i++)
+	for (uint32_t i = 0; i < s->nlights; i++) {
 		rad_mem_free(&s->mem, RAD_MEM_NAMES, s->lights[i].name);
+		rad_mem_free(&s->mem, RAD_MEM_LIGHTS, s->lights[i].gonio);
+	}
 	rad_mem_free(&s->mem, RAD_MEM_LIGHTS, s->lights);
 	for (uint32_t i = 0; i < s->nnodes; i++)
 		rad_mem_free(&s->mem, RAD_MEM_NAMES, s->nodes[i]);

@@ -540,6 +540,8 @@ static double light_geometry(const rad_light *L, v3 x, v3 nx)
 	double e = cos_r / d2 * range_window(L->range, dist);
 	if (L->kind == RAD_LIGHT_SPOT)
 		e *= spot_factor(L, v3_scale(d, -1.0 / dist));
+	else if (L->gonio)
+		e *= rad_gonio_factor(L->gonio, v3_scale(d, -1.0 / dist));
 	return e;
 }
 

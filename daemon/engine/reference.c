@@ -271,6 +271,8 @@ static double light_at(const tracer *tr, const rad_light *L, v3 x, v3 n)
 	double e = c / (dist * dist) * range_window(L->range, dist);
 	if (L->kind == RAD_LIGHT_SPOT)
 		e *= cone_falloff(L, -v3_dot(d, v3_d(L->dir)) / dist);
+	else if (L->gonio) /* the one table lookup (gonio.c) */
+		e *= rad_gonio_factor(L->gonio, v3_scale(d, -1.0 / dist));
 	if (!(e > 0) || !rad_vis_segment(tr->vis, x, &n, pos, NULL))
 		return 0.0;
 	return e;

@@ -458,7 +458,11 @@ static rad_status check_light(const rad_light_desc *d, uint32_t which,
 	if (d->kind != RAD_LIGHT_DIRECTIONAL && !finite3(d->position))
 		return rad_fail(err, RAD_ERR_INVALID,
 		                "light %u: position is not finite", which);
-	if (d->kind == RAD_LIGHT_POINT)
+	if (d->candela && d->kind != RAD_LIGHT_POINT)
+		return rad_fail(err, RAD_ERR_INVALID,
+		                "light %u: a candela table needs a point light",
+		                which);
+	if (d->kind == RAD_LIGHT_POINT && !d->candela)
 		return RAD_OK;
 	v3 dir = v3_d(d->direction);
 	if (!v3_finite(dir) || !(v3_len(dir) > 0))
@@ -481,12 +485,19 @@ rad_status rad_scene_add_light(rad_scene *s, const rad_light_desc *d,
 	          s->nlights + 1, sizeof(*s->lights)))
 		return rad_fail(err, RAD_ERR_NOMEM, "light: out of memory");
 	rad_light L = {.kind = d->kind, .range = d->range};
+	if (d->candela &&
+	    (st = rad_gonio_new(&s->mem, d, s->nlights, &L.gonio, err)))
+		return st;
 	if (d->name &&
-	    !(L.name = rad_mem_strdup(&s->mem, RAD_MEM_NAMES, d->name)))
+	    !(L.name = rad_mem_strdup(&s->mem, RAD_MEM_NAMES, d->name))) {
+		rad_mem_free(&s->mem, RAD_MEM_LIGHTS, L.gonio);
 		return rad_fail(err, RAD_ERR_NOMEM, "light: out of memory");
-	memcpy(L.intensity, d->intensity, sizeof(L.intensity));
+	}
+	for (int c = 0; c < 3; c++)
+		L.intensity[c] =
+		        d->intensity[c] * (L.gonio ? L.gonio->peak_cd : 1.0);
 	v3 dir = v3_make(0, 0, -1); /* unused by point lights: glTF's -Z */
-	if (d->kind != RAD_LIGHT_POINT)
+	if (d->kind != RAD_LIGHT_POINT || d->candela)
 		dir = v3_norm(v3_d(d->direction));
 	L.dir[0] = dir.x;
 	L.dir[1] = dir.y;

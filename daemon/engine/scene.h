@@ -46,6 +46,22 @@ typedef struct rad_poly {
 	uint8_t quad;              /* 1 = parallelogram, 0 = triangle */
 } rad_poly;
 
+/*
+ * A point light's goniometric table (gonio.c), one LIGHTS block: the
+ * grid points into data[].  The light's intensity holds the table's peak
+ * (times the caller's RGB factor); rad_gonio_factor gives the table over
+ * its peak, in [0, 1].
+ */
+typedef struct rad_gonio {
+	rad_candela_grid grid; /* the copy, in data[] */
+	double nadir[3];       /* unit; gamma 0 */
+	double axis0[3];       /* unit; C = 0, perpendicular to nadir */
+	double axis90[3];      /* unit; C = 90: axis0 x nadir */
+	double peak_cd;        /* largest value (0: a dark table) */
+	double flux_per_peak;  /* lm per cd of peak */
+	double data[];         /* C angles, gamma angles, values */
+} rad_gonio;
+
 typedef struct rad_light {
 	rad_light_kind kind;
 	double pos[3];       /* point, spot */
@@ -54,7 +70,14 @@ typedef struct rad_light {
 	double range;        /* 0 = infinite */
 	double cos_inner, cos_outer; /* spot cone, cosines */
 	char *name;                  /* may be NULL */
+	rad_gonio *gonio;            /* LIGHTS; NULL = no table */
 } rad_light;
+
+/* Copy d->candela (checked) into a new LIGHTS block of mem. */
+rad_status rad_gonio_new(rad_mem *mem, const rad_light_desc *d, uint32_t which,
+                         rad_gonio **out, rad_error *err);
+/* The table's intensity towards unit direction w, over its peak. */
+double rad_gonio_factor(const rad_gonio *t, v3 w);
 
 typedef struct rad_vis rad_vis; /* vis.h */
 

@@ -318,18 +318,24 @@ static rad_status add_light(sio_import *im, int ni, int li, const sio_mat4 *w)
 	rad_status st = light_values(im, li, &d);
 	if (st != RAD_OK)
 		return st;
-	const double *z = w->m + 8;
+	const double *x = w->m, *z = w->m + 8;
 	double len = sqrt(z[0] * z[0] + z[1] * z[1] +
 	                  z[2] * z[2]); /* > 0: w is regular */
+	double lx = sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]);
 	for (int k = 0; k < 3; k++) {
 		d.position[k] = w->m[12 + k];
 		d.direction[k] = -z[k] / len;
+		d.c0_axis[k] = x[k] / lx; /* a luminaire's C = 0 */
 	}
 	sio_str lname = im->d->lights[li].name;
 	d.name = lname.len ? lname.s : sio_node_name(im->d, ni);
 	char label[192];
 	snprintf(label, sizeof label, "node %d '%s'", ni,
 	         sio_node_name(im->d, ni));
+	const char *node =
+	        im->d->nodes[ni].name.len ? im->d->nodes[ni].name.s : "";
+	if (im->hook && (st = im->hook(im->hook_ud, node, &d, im->err)))
+		return sio_blame(im->err, st, label);
 	return sio_blame(im->err, rad_scene_add_light(im->s, &d, im->err),
 	                 label);
 }

@@ -32,6 +32,7 @@ import sys
 LAYERS = [
     ("luxrad_options", "libluxrad_options.a"),
     ("luxrad_engine", "libluxrad_engine.a"),
+    ("luxrad_photometry", "libluxrad_photometry.a"),
     ("luxrad_pack", "libluxrad_pack.a"),
     ("luxrad_sceneio", "libluxrad_sceneio.a"),
     ("luxrad_json", "libluxrad_json.a"),

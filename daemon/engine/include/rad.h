@@ -112,20 +112,65 @@ const char *rad_mem_kind_name(rad_mem_kind kind);
 typedef struct rad_scene rad_scene;
 
 typedef enum rad_light_kind {
-	RAD_LIGHT_POINT = 0,  /* intensity in candela, isotropic */
+	RAD_LIGHT_POINT = 0,  /* intensity in candela, isotropic, or a
+	                         goniometric table (rad_light_desc.candela) */
 	RAD_LIGHT_SPOT,       /* candela on axis, smooth glTF cone falloff */
 	RAD_LIGHT_DIRECTIONAL /* illuminance in lux on a plane facing it */
 } rad_light_kind;
 
+/*
+ * A goniometric intensity table (type C photometry, as IES LM-63 and
+ * EULUMDAT files give it): intensity in candela at C-plane angles
+ * (azimuth about the luminaire's axis) and gamma angles (from the nadir,
+ * 0, to the zenith, 180), degrees.  Between the given angles the
+ * intensity is bilinear in (C, gamma); C wraps round from the last plane
+ * to the first + 360; outside [gamma first, gamma last] it is 0.  One C
+ * plane means rotational symmetry.  Borrowed by the calls that take it.
+ */
+#define RAD_CANDELA_MAX_ANGLES 4096u      /* per axis */
+#define RAD_CANDELA_MAX_VALUES (1u << 20) /* nc x ngamma */
+
+typedef struct rad_candela_grid {
+	uint32_t nc;             /* C planes, >= 1 */
+	uint32_t ngamma;         /* gamma angles per plane, >= 2 */
+	const double *c_deg;     /* nc, strictly ascending, in [0, 360] */
+	const double *gamma_deg; /* ngamma, strictly ascending, in [0, 180] */
+	const double *cd;        /* nc x ngamma, plane after plane: the value
+	                            at (c_deg[i], gamma_deg[j]) is
+	                            cd[i * ngamma + j]; finite, >= 0 */
+} rad_candela_grid;
+
+/* RAD_ERR_INVALID naming the defect, or RAD_OK for a usable grid. */
+rad_status rad_candela_check(const rad_candela_grid *g, rad_error *err);
+/* Intensity in the direction (c, gamma), degrees (any C; gamma outside
+ * the table is 0).  g must have passed rad_candela_check. */
+double rad_candela_at(const rad_candela_grid *g, double c_deg,
+                      double gamma_deg);
+/* Luminous flux, lm: the exact integral over the sphere of the bilinear
+ * intensity rad_candela_at gives. */
+double rad_candela_flux(const rad_candela_grid *g);
+/* The largest value of the table, cd. */
+double rad_candela_peak(const rad_candela_grid *g);
+
 typedef struct rad_light_desc {
 	rad_light_kind kind;
 	double position[3];  /* metres (point, spot) */
-	double direction[3]; /* direction light travels (spot, directional) */
-	double intensity[3]; /* candela (point, spot) or lux (directional) */
+	double direction[3]; /* direction light travels (spot, directional);
+	                        with candela: the nadir, gamma 0 */
+	double intensity[3]; /* candela (point, spot) or lux (directional);
+	                        with candela: an RGB factor on the table
+	                        (1, 1, 1 = the table's candela) */
 	double range;        /* metres; 0 = infinite (glTF default) */
 	double inner_cone;   /* radians, spot only */
 	double outer_cone;   /* radians, spot only */
 	const char *name;    /* copied; may be NULL */
+	const rad_candela_grid *candela; /* point only: a luminaire's
+	                                    distribution, copied; NULL =
+	                                    isotropic */
+	double c0_axis[3]; /* with candela: the direction of C = 0 (made
+	                      perpendicular to direction); C = 90 is
+	                      c0_axis x direction.  May be zero when
+	                      candela->nc is 1 */
 } rad_light_desc;
 
 typedef struct rad_scene_counts {
