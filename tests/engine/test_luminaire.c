@@ -26,23 +26,17 @@
 #include <string.h>
 
 #include "photometry.h"
+#include "photometry_data.h"
 #include "rad.h"
 #include "scene.h"
 
-#define DATA LUXRAD_SOURCE_DIR "/tests/data/photometry/"
 #define HEIGHT 3.0
 
 static pho_table *load(const char *name)
 {
-	char path[512], err[256];
-	snprintf(path, sizeof path, DATA "%s", name);
-	FILE *fp = fopen(path, "rb");
-	if (!fp)
-		fail_msg("cannot open %s", path);
-	char *b = malloc(1 << 16);
-	assert_non_null(b);
-	size_t len = fread(b, 1, 1 << 16, fp);
-	fclose(fp);
+	char err[256];
+	size_t len;
+	char *b = pho_sample(name, &len);
 	pho_table *t = NULL;
 	if (pho_parse(b, len, NULL, &t, err, sizeof err) != PHO_OK)
 		fail_msg("%s: %s", name, err);

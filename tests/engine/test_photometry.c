@@ -27,8 +27,8 @@
 #include <string.h>
 
 #include "photometry.h"
+#include "photometry_data.h"
 
-#define DATA LUXRAD_SOURCE_DIR "/tests/data/photometry/"
 #define IES "full_2002.ies"
 #define LDT "quadrant.ldt"
 
@@ -48,24 +48,10 @@ static double f(shape s, double c_deg, double g_deg)
 	return a * (1 + g_deg / 60);
 }
 
-static char *slurp(const char *name, size_t *len)
-{
-	char path[512];
-	snprintf(path, sizeof path, DATA "%s", name);
-	FILE *fp = fopen(path, "rb");
-	if (!fp)
-		fail_msg("cannot open %s", path);
-	char *b = malloc(1 << 16);
-	assert_non_null(b);
-	*len = fread(b, 1, 1 << 16, fp);
-	fclose(fp);
-	return b;
-}
-
 static pho_table *parse_file(const char *name, const pho_opts *o)
 {
 	size_t len;
-	char *b = slurp(name, &len), err[256];
+	char *b = pho_sample(name, &len), err[256];
 	pho_table *t = NULL;
 	pho_status st = pho_parse(b, len, o, &t, err, sizeof err);
 	free(b);
@@ -247,7 +233,7 @@ static pho_status edited(const char *file, const char *from, const char *to,
                          const pho_opts *o, char *err, size_t errlen)
 {
 	size_t len;
-	char *b = slurp(file, &len);
+	char *b = pho_sample(file, &len);
 	char *at = memmem(b, len, from, strlen(from));
 	if (!at)
 		fail_msg("%s: no '%s'", file, from);
@@ -367,7 +353,7 @@ static void test_every_truncation_fails_cleanly(void **state)
 	size_t tried = 0;
 	for (size_t k = 0; k < sizeof files / sizeof *files; k++) {
 		size_t len;
-		char *b = slurp(files[k], &len);
+		char *b = pho_sample(files[k], &len);
 		size_t must_fail = last_value_at(files[k], b, len);
 		for (size_t n = 0; n < len; n++) {
 			/* An exact-size copy: a read past it is a bug the
