@@ -22,9 +22,9 @@ set -euo pipefail
 PACKAGES=(
 	build-essential cmake ninja-build pkg-config clang-format
 	libembree-dev libtinygltf-dev libmodbus-dev libcmocka-dev
-	libjansson-dev libsqlite3-dev
+	libjansson-dev libsqlite3-dev libpng-dev
 	mbpoll gnuplot-nox python3 python3-pymodbus python3-serial-asyncio
-	nodejs npm
+	nodejs npm chromium
 )
 
 log() { printf 'install-deps: %s\n' "$*" >&2; }
