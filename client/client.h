@@ -12,6 +12,8 @@
  *   cmd_query.c    query (points file, grid, surfaces) and export
  *   cmd_watch.c    watch and run --wait: events, progress bar, JSON lines
  *   cmd_sensors.c  sensor-add and sensors
+ *   report_html.c  the report's HTML: escaping, tables, embedded images
+ *   cmd_report.c   report: work plane, surfaces, images, the HTML file
  *   luxrad.c       main: the command table, argv parsing, --help, dispatch
  *
  * The CLI is thin on purpose: it checks what it can check locally
@@ -78,7 +80,15 @@ enum {
 	X(NORMAL, "normal", 1, "X,Y,Z",                                        \
 	  "surface normal (grid: [u x v]; sensor-add: [0,1,0])")               \
 	X(AT, "at", 1, "X,Y,Z", "sensor-add: the sensor's position, metres")   \
-	X(OUTPUT, "output", 1, "FILE", "export: the GLB file to write (-o)")
+	X(OUTPUT, "output", 1, "FILE",                                         \
+	  "export, report: the file to write (-o)")                            \
+	X(WORKPLANE_HEIGHT, "workplane-height", 1, "H",                        \
+	  "report: work plane height above the floor, m [0.8]")                \
+	X(BORDER, "border", 1, "B", "report: work plane border band, m [0.5]") \
+	X(FLOOR, "floor", 1, "NODE",                                           \
+	  "report: the node whose extent is the room's [floor]")               \
+	X(SURFACE, "surface", 1, "NODE",                                       \
+	  "report: a node to grid (repeatable) [every node]")
 
 typedef enum lx_opt {
 #define LX_OPT_ENUM_(id, name, arg, meta, help) LX_OPT_##id,
@@ -121,7 +131,9 @@ typedef struct lx_ctx {
 	int given[LX_OPT_COUNT];       /* times each option was given */
 	char **pos;                    /* positional arguments */
 	int npos;
-	int json; /* --json */
+	int json;              /* --json */
+	const char **surfaces; /* every --surface, in order */
+	int nsurfaces;
 	lx_conn conn;
 	int connected;
 } lx_ctx;
@@ -215,6 +227,7 @@ int lx_cmd_query(lx_ctx *cx);
 int lx_cmd_export(lx_ctx *cx);
 int lx_cmd_sensor_add(lx_ctx *cx);
 int lx_cmd_sensors(lx_ctx *cx);
+int lx_cmd_report(lx_ctx *cx);
 
 /* Build job.create's "options" from the command line; -1 usage error. */
 int lx_job_options(lx_ctx *cx, json_t *req);
@@ -231,6 +244,21 @@ int lx_follow_job(lx_ctx *cx, long long job, const char *state, FILE *live,
                   int json_lines, char *final_state, size_t fslen);
 /* Exit code for a final state. */
 int lx_state_exit(const char *state);
+
+/* -------------------------------------------------------- report_html.c */
+
+/* Text with & < > " ' escaped, for element content and attributes. */
+void lx_html_text(FILE *f, const char *s);
+/* A number of an object ("-" when absent or null) with fmt. */
+void lx_html_num(FILE *f, const json_t *o, const char *k, const char *fmt);
+/* <img> of PNG bytes as a data: URI, alt text escaped. */
+void lx_html_png(FILE *f, const unsigned char *png, size_t len,
+                 const char *alt);
+/* The page head (title escaped, inline CSS) and foot. */
+void lx_html_head(FILE *f, const char *title);
+void lx_html_foot(FILE *f);
+/* The summary tables: scene, job, luminaires, accuracy and cost. */
+void lx_html_summary(FILE *f, const json_t *job, const json_t *scene);
 
 /* cmd_query.c: the points file format of luxrad-solve --points. */
 int lx_points_load(const char *path, json_t **points, size_t *n);

@@ -95,6 +95,28 @@ static const cmd_def commands[] = {
          "_ILLUMINANCE\n(lux per vertex). The file is written atomically "
          "(a temporary, then\nrenamed).\n\nExamples:\n  luxrad export 4 -o "
          "box-lit.glb\n"},
+        {"report", lx_cmd_report, 1,
+         LX_BIT(OUTPUT) | LX_BIT(WORKPLANE_HEIGHT) | LX_BIT(BORDER) |
+                 LX_BIT(FLOOR) | LX_BIT(SURFACE),
+         "JOB -o FILE.html [--workplane-height H] [--border B] [--floor "
+         "NODE]\n       [--surface NODE]...",
+         "write a lighting report (one self-contained HTML file)",
+         "The report holds the scene and the job, the luminaires, the "
+         "solve's accuracy\nand cost, and the calculation surfaces with "
+         "their Em, Emin, Emax, U0 =\nEmin/Em and Ud = Emin/Emax and "
+         "false-colour images (PNG, embedded):\n- the work plane: a "
+         "horizontal grid H above the floor over the room's extent\n  "
+         "(the --floor node's, by default a node named \"floor\", else "
+         "the scene's\n  bounds) less a border band B, at the EN 12464-1 "
+         "spacing; a plan view with\n  a legend and isolines. In a room "
+         "under 2 H tall the plane is put at half\n  its height; the band "
+         "is at most a quarter of the shorter side.\n- each --surface "
+         "node (by default every node with polygons, at most 24):\n  its "
+         "faces gridded on the polygons themselves (query.node).\nThe "
+         "file has no external references; it is written atomically.\n\n"
+         "Examples:\n  luxrad report 4 -o report.html\n  luxrad report 4 "
+         "-o office.html --workplane-height 0.75 --border 0.5 \\\n      "
+         "--surface floor --surface walls\n"},
         {"pause", lx_cmd_control, 1, 0, "JOB",
          "pause a job (within its current iteration)",
          "Examples:\n  luxrad pause 4\n"},
@@ -268,6 +290,8 @@ static int parse_option(lx_ctx *cx, int argc, char **argv, int *i,
 	}
 	cx->val[o] = value;
 	cx->given[o]++;
+	if (o == LX_OPT_SURFACE)
+		cx->surfaces[cx->nsurfaces++] = value;
 	return 0;
 }
 
@@ -362,13 +386,17 @@ int main(int argc, char **argv)
 
 	memset(&cx, 0, sizeof cx);
 	cx.pos = calloc((size_t)argc + 1, sizeof *cx.pos);
-	if (!cx.pos) {
+	cx.surfaces = calloc((size_t)argc + 1, sizeof *cx.surfaces);
+	if (!cx.pos || !cx.surfaces) {
+		free(cx.pos);
+		free(cx.surfaces);
 		fprintf(stderr, "luxrad: out of memory\n");
 		return LX_EXIT_USAGE;
 	}
 	rc = dispatch(&cx, argc, argv);
 	lx_close(&cx);
 	free(cx.pos);
+	free(cx.surfaces);
 	if (fflush(stdout) != 0 && rc == LX_EXIT_OK) {
 		fprintf(stderr, "luxrad: cannot write to stdout\n");
 		rc = LX_EXIT_DAEMON;

@@ -27,7 +27,7 @@ PACKAGES=(
 	libjansson-dev libsqlite3-dev libpng-dev libjpeg62-turbo-dev
 	mbpoll gnuplot-nox python3 python3-pymodbus python3-serial-asyncio
 	python3-numpy python3-pil
-	nodejs npm
+	nodejs npm chromium
 )
 
 log() { printf 'install-deps: %s\n' "$*" >&2; }

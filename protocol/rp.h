@@ -125,6 +125,7 @@ typedef struct rp_error {
 	X(QUERY_POINTS, "query.points", 0, "lux at points")                    \
 	X(QUERY_GRID, "query.grid", 0, "lux on a calculation grid")            \
 	X(QUERY_SURFACES, "query.surfaces", 0, "lux per surface (node)")       \
+	X(QUERY_NODE, "query.node", 0, "lux on a grid over a node's faces")    \
 	X(EXPORT, "export", 0, "the solved mesh as GLB (payload)")             \
 	X(SENSOR_ADD, "sensor.add", 0, "a named illuminance sensor on a job")  \
 	X(SENSOR_LIST, "sensor.list", 0, "a job's sensors and latest lux")

@@ -1,4 +1,5 @@
-# tap.sh -- the TAP-style checks shared by test_cli.sh and test_client.sh.
+# tap.sh -- the TAP-style checks shared by test_cli.sh, test_client.sh and
+# test_report.sh, and the daemon they start.
 # Source it after setting TMP (a scratch directory) and PROGRAM (the
 # command that run() runs).  Counts go to PASSES and FAILS.
 FAILS=0
@@ -34,4 +35,40 @@ expect_exit() {
 	else
 		pass "$name"
 	fi
+}
+
+# tap_cleanup: stop the daemon DPID (if any) and remove TMP; scripts
+# that start one set DPID= and `trap tap_cleanup EXIT`.
+tap_cleanup() {
+	if [[ -n ${DPID:-} ]] && kill -0 "$DPID" 2>/dev/null; then
+		kill "$DPID" 2>/dev/null
+		wait "$DPID" 2>/dev/null
+	fi
+	rm -rf "$TMP"
+}
+
+# start_luxradd LUXRADD DIR ARGS...: start a daemon with data directory
+# DIR, TCP on an ephemeral loopback port and ARGS, its output in
+# $TMP/daemon.log; sets DPID and ADDR (the TCP address it wrote in
+# luxradd.addr), and returns 1, the log shown, when it did not start.
+start_luxradd() {
+	local bin=$1 dir=$2
+	shift 2
+	mkdir -p "$dir"
+	"$bin" --data-dir "$dir" --listen-tcp 127.0.0.1:0 "$@" \
+		>"$TMP/daemon.log" 2>&1 &
+	DPID=$!
+	ADDR=
+	for _ in $(seq 1 200); do
+		if [[ -s $dir/luxradd.addr ]]; then
+			ADDR=$(awk '$1 == "tcp" { print $2; exit }' \
+				"$dir/luxradd.addr")
+			[[ -n $ADDR ]] && return 0
+		fi
+		kill -0 "$DPID" 2>/dev/null || break
+		sleep 0.1
+	done
+	fail "luxradd started and wrote luxradd.addr"
+	sed 's/^/#   luxradd: /' "$TMP/daemon.log" | tail -n 20
+	return 1
 }

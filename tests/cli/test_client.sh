@@ -29,18 +29,11 @@ PY=/usr/bin/python3
 
 TMP=$(mktemp -d "${TMPDIR:-/tmp}/luxrad-client.XXXXXX") || exit 1
 DPID=
-cleanup() {
-	if [[ -n $DPID ]] && kill -0 "$DPID" 2>/dev/null; then
-		kill "$DPID" 2>/dev/null
-		wait "$DPID" 2>/dev/null
-	fi
-	rm -rf "$TMP"
-}
-trap cleanup EXIT
 unset LUXRAD_CONNECT LUXRAD_TOKEN LUXRAD_TOKEN_FILE
 PROGRAM="$LUXRAD"
 # shellcheck source=tap.sh
 source "$(dirname "$0")/tap.sh"
+trap tap_cleanup EXIT
 
 # expect_out NAME SUBSTRING: the last run's stdout contains SUBSTRING.
 expect_out() {
@@ -184,23 +177,8 @@ if [[ ! -x $LUXRADD ]]; then
 	exit 1
 fi
 D="$TMP/d"
-mkdir -p "$D"
-"$LUXRADD" --data-dir "$D" --listen-tcp 127.0.0.1:0 \
-	--listen-unix "$D/s.sock" --metrics-listen none \
-	--modbus-listen 127.0.0.1:0 >"$TMP/daemon.log" 2>&1 &
-DPID=$!
-ADDR=
-for _ in $(seq 1 200); do
-	if [[ -s $D/luxradd.addr ]]; then
-		ADDR=$(awk '$1 == "tcp" { print $2; exit }' "$D/luxradd.addr")
-		[[ -n $ADDR ]] && break
-	fi
-	kill -0 "$DPID" 2>/dev/null || break
-	sleep 0.1
-done
-if [[ -z $ADDR ]]; then
-	fail "luxradd started and wrote luxradd.addr"
-	sed 's/^/#   luxradd: /' "$TMP/daemon.log" | tail -n 20
+if ! start_luxradd "$LUXRADD" "$D" --listen-unix "$D/s.sock" \
+	--metrics-listen none --modbus-listen 127.0.0.1:0; then
 	echo "# $PASSES passed, $FAILS failed"
 	exit 1
 fi

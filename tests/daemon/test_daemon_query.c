@@ -11,7 +11,13 @@
  *    spacing 0.2 * 5^log10(d) capped at 10 m, min <= mean <= max, u0 =
  *    min/mean, values equal query.points at the returned points;
  *  - query.surfaces: one entry per mesh node, named as in the file,
- *    min <= mean <= max, the office floor's area;
+ *    min <= mean <= max, the office floor's area, a flat floor's bounds;
+ *  - query.node: the floor one face facing up, the walls four vertical
+ *    ones; the EN spacing per face, cells, statistics (u0, ud) from the
+ *    values, a cell equal to query.points at its centre; by index as by
+ *    name; unknown names and indices, bad types and spacings refused;
+ *  - scene.info's luminaires: the office's two panels (flux = exitance x
+ *    area) and its desk lamp;
  *  - pipelined requests are answered in order.
  */
 #include <math.h>
@@ -585,6 +591,197 @@ static void test_query_surfaces_per_node(void **state)
 	dm_pass();
 }
 
+/* ------------------------------------------------- node grids, luminaires */
+
+/* One face of query.node: its grid, statistics and the points behind
+ * them (a cell centre re-asked through query.points gives its lux). */
+static void check_face(dm_conn *c, const json_t *job, const json_t *f,
+                       const char *what)
+{
+	long long nu = dm_int(f, "nu"), nv = dm_int(f, "nv");
+	json_t *lux = dm_get(f, "lux");
+	const json_t *o = dm_get(f, "origin"), *u = dm_get(f, "u"),
+	             *v = dm_get(f, "v"), *n = dm_get(f, "normal");
+	double lu = 0, lv = 0, mn = HUGE_VAL, mx = 0, sum = 0;
+	long long on = 0;
+	for (int k = 0; k < 3; k++) {
+		double a = json_number_value(json_array_get(u, k));
+		double b = json_number_value(json_array_get(v, k));
+		lu += a * a;
+		lv += b * b;
+	}
+	lu = sqrt(lu);
+	lv = sqrt(lv);
+	double sp = dm_num(f, "spacing");
+	if (fabs(sp - en12464_spacing(lu > lv ? lu : lv)) > 1e-9 * sp)
+		fail_msg("%s: spacing %g for sides %g, %g", what, sp, lu, lv);
+	if (nu != (long long)ceil(lu / sp) || nv != (long long)ceil(lv / sp))
+		fail_msg("%s: %lld x %lld cells for %g x %g at %g", what, nu,
+		         nv, lu, lv, sp);
+	assert_int_equal(json_array_size(lux), (size_t)(nu * nv));
+	long long probe = -1;
+	for (size_t i = 0; i < json_array_size(lux); i++) {
+		json_t *x = json_array_get(lux, i);
+		if (json_is_null(x))
+			continue;
+		double e = json_number_value(x);
+		on++;
+		mn = e < mn ? e : mn;
+		mx = e > mx ? e : mx;
+		sum += e;
+		if (probe < 0 && e > 0)
+			probe = (long long)i;
+	}
+	assert_int_equal(dm_int(f, "points"), on);
+	if (on == 0)
+		return;
+	double mean = sum / on;
+	if (fabs(dm_num(f, "min") - mn) > 1e-9 * mx ||
+	    fabs(dm_num(f, "max") - mx) > 1e-9 * mx ||
+	    fabs(dm_num(f, "mean") - mean) > 1e-9 * mx)
+		fail_msg("%s: min/mean/max %g %g %g, want %g %g %g", what,
+		         dm_num(f, "min"), dm_num(f, "mean"), dm_num(f, "max"),
+		         mn, mean, mx);
+	if (fabs(dm_num(f, "u0") - mn / mean) > 1e-9 ||
+	    fabs(dm_num(f, "ud") - mn / mx) > 1e-9)
+		fail_msg("%s: u0 %g ud %g", what, dm_num(f, "u0"),
+		         dm_num(f, "ud"));
+	if (probe < 0)
+		return;
+	/* the probe cell's centre, on the face's plane, asked directly */
+	double s = (probe % nu + 0.5) / nu, t = (probe / nu + 0.5) / nv;
+	double pt[6], got;
+	for (int k = 0; k < 3; k++) {
+		pt[k] = json_number_value(json_array_get(o, k)) +
+		        s * json_number_value(json_array_get(u, k)) +
+		        t * json_number_value(json_array_get(v, k));
+		pt[3 + k] = json_number_value(json_array_get(n, k));
+	}
+	dm_query_points(c, job, pt, 1, &got);
+	double want = json_number_value(json_array_get(lux, (size_t)probe));
+	if (fabs(got - want) > 1e-3 * want + 1e-6)
+		fail_msg("%s: cell %lld has %g lux, query.points %g", what,
+		         probe, want, got);
+}
+
+static void test_query_node_faces_and_luminaires(void **state)
+{
+	(void)state;
+	dm_daemon *d = dm_start(NULL);
+	dm_conn *c = dm_open(d, NULL);
+	json_t *sc;
+	json_t *job = dm_solve_sample(c, "office.gltf", &sc);
+
+	/* the floor: one face, facing up, 12 m2, covered by its grid */
+	json_t *fl = dm_ok(c, "{s:s, s:O, s:s}", "cmd", "query.node", "job",
+	                   job, "node", "floor");
+	json_t *faces = dm_get(fl, "faces");
+	assert_int_equal(json_array_size(faces), 1);
+	json_t *f0 = json_array_get(faces, 0);
+	assert_true(json_number_value(json_array_get(dm_get(f0, "normal"), 1)) >
+	            0.999);
+	assert_true(fabs(dm_num(fl, "area") - 12.0) < 0.06);
+	check_face(c, job, f0, "floor");
+	assert_true(dm_int(fl, "points") ==
+	            dm_int(f0, "nu") * dm_int(f0, "nv"));
+	assert_true(dm_num(fl, "min") <= dm_num(fl, "mean") &&
+	            dm_num(fl, "mean") <= dm_num(fl, "max"));
+
+	/* by index, the same answer */
+	json_t *byi = dm_ok(c, "{s:s, s:O, s:I}", "cmd", "query.node", "job",
+	                    job, "node", (json_int_t)dm_int(fl, "node"));
+	assert_true(dm_num(byi, "mean") == dm_num(fl, "mean"));
+
+	/* the walls: four vertical faces, each checked, points adding up */
+	json_t *w = dm_ok(c, "{s:s, s:O, s:s}", "cmd", "query.node", "job", job,
+	                  "node", "walls");
+	faces = dm_get(w, "faces");
+	assert_int_equal(json_array_size(faces), 4);
+	long long pts = 0;
+	size_t i;
+	json_t *f;
+	json_array_foreach(faces, i, f)
+	{
+		double ny = json_number_value(
+		        json_array_get(dm_get(f, "normal"), 1));
+		assert_true(fabs(ny) < 1e-6);
+		check_face(c, job, f, "walls");
+		pts += dm_int(f, "points");
+	}
+	assert_int_equal(dm_int(w, "points"), pts);
+
+	/* a spacing asked is used on every face */
+	json_t *sp = dm_ok(c, "{s:s, s:O, s:s, s:f}", "cmd", "query.node",
+	                   "job", job, "node", "ceiling", "spacing", 0.5);
+	assert_true(dm_num(json_array_get(dm_get(sp, "faces"), 0), "spacing") ==
+	            0.5);
+
+	/* bad input */
+	json_decref(dm_err(c, "not_found", "{s:s, s:O, s:s}", "cmd",
+	                   "query.node", "job", job, "node", "no such node"));
+	json_decref(dm_err(c, "not_found", "{s:s, s:O, s:i}", "cmd",
+	                   "query.node", "job", job, "node", 9999));
+	json_decref(dm_err(c, "bad_request", "{s:s, s:O, s:i}", "cmd",
+	                   "query.node", "job", job, "node", -1));
+	json_decref(dm_err(c, "bad_request", "{s:s, s:O, s:b}", "cmd",
+	                   "query.node", "job", job, "node", 1));
+	json_decref(dm_err(c, "bad_request", "{s:s, s:O}", "cmd", "query.node",
+	                   "job", job));
+	json_decref(dm_err(c, "bad_request", "{s:s, s:O, s:s, s:f}", "cmd",
+	                   "query.node", "job", job, "node", "floor", "spacing",
+	                   0.0));
+	json_decref(dm_err(c, "bad_request", "{s:s, s:O, s:s, s:f}", "cmd",
+	                   "query.node", "job", job, "node", "floor", "spacing",
+	                   1e-4));
+	json_decref(dm_err(c, "not_found", "{s:s, s:i, s:s}", "cmd",
+	                   "query.node", "job", 9999, "node", "floor"));
+
+	/* scene.info's luminaires: the two emitting panels, the lamp */
+	json_t *si = dm_ok(c, "{s:s, s:O}", "cmd", "scene.info", "scene", sc);
+	json_t *lum = dm_get(si, "luminaires");
+	json_t *em = dm_get(lum, "emitters"), *lights = dm_get(lum, "lights");
+	assert_int_equal(json_array_size(em), 2);
+	json_array_foreach(em, i, f)
+	{
+		assert_true(!strncmp(json_string_value(dm_get(f, "name")),
+		                     "luminaire_", 10));
+		assert_true(
+		        dm_num(f, "flux_lm") > 0 &&
+		        fabs(dm_num(f, "flux_lm") -
+		             dm_num(f, "exitance_lux") * dm_num(f, "area")) <
+		                1e-6 * dm_num(f, "flux_lm"));
+	}
+	assert_int_equal(json_array_size(lights),
+	                 dm_int(dm_get(si, "counts"), "lights"));
+	assert_string_equal(
+	        json_string_value(dm_get(json_array_get(lights, 0), "name")),
+	        "desk_lamp");
+	assert_true(dm_num(json_array_get(lights, 0), "candela") > 0);
+
+	/* query.surfaces' bounds: the floor is flat */
+	json_t *qs =
+	        dm_ok(c, "{s:s, s:O}", "cmd", "query.surfaces", "job", job);
+	json_array_foreach(dm_get(qs, "surfaces"), i, f)
+	{
+		if (strcmp(json_string_value(dm_get(f, "name")), "floor"))
+			continue;
+		json_t *b = dm_get(f, "bounds");
+		assert_true(
+		        json_number_value(
+		                json_array_get(dm_get(b, "min"), 1)) ==
+		        json_number_value(json_array_get(dm_get(b, "max"), 1)));
+	}
+	json_decref(qs);
+	json_decref(si);
+	json_decref(sp);
+	json_decref(w);
+	json_decref(byi);
+	json_decref(fl);
+	json_decref(job);
+	json_decref(sc);
+	dm_pass();
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -595,6 +792,7 @@ int main(void)
 	        T(test_pipelined_requests_are_answered_in_order),
 	        T(test_query_grid_cells_spacing_and_uniformity),
 	        T(test_query_surfaces_per_node),
+	        T(test_query_node_faces_and_luminaires),
 #undef T
 	};
 	const char *filter = getenv("LUXRAD_TEST_FILTER");

@@ -37,6 +37,7 @@ LAYERS = [
     ("luxrad_sceneio", "libluxrad_sceneio.a"),
     ("luxrad_json", "libluxrad_json.a"),
     ("luxrad_protocol", "protocol/libluxrad_protocol.a"),
+    ("luxrad_image", "client/libluxrad_image.a"),
     ("luxrad_modbus", "daemon/server/libluxrad_modbus.a"),
     ("luxrad_srvbase", "daemon/server/libluxrad_srvbase.a"),
     ("luxrad_store", "daemon/server/libluxrad_store.a"),

@@ -735,6 +735,60 @@ rad_status rad_reference_illuminance(const rad_scene *s, const double *pts,
 /* Name of a scene node (glTF node / mesh), "" when it has none. */
 const char *rad_scene_node_name(const rad_scene *s, uint32_t node);
 
+/* ------------------------------------------------------ survey (survey.c) */
+/*
+ * What a lighting report reads from a committed scene.  A node's
+ * polygons grouped by facing are its faces (calculation surfaces): each
+ * is covered by the rectangle origin + s u + t v (s, t in [0, 1]) in its
+ * plane, u to the right and v downwards seen from the front (a
+ * horizontal face: u = +x, v = +z, the plan view).
+ */
+typedef struct rad_face {
+	double normal[3];             /* unit, the side sampled */
+	double origin[3], u[3], v[3]; /* rectangle over the face, metres */
+	double area_m2;               /* area of its polygons */
+	uint32_t polygons;
+} rad_face;
+
+/*
+ * The faces of node, largest first, at most max of them (*nfaces set);
+ * *skipped_m2 receives the area of polygons facing beyond the max-th
+ * facing.  RAD_ERR_INVALID for a node out of range, RAD_ERR_STATE before
+ * commit.  A node without polygons has no faces.
+ */
+rad_status rad_scene_node_faces(const rad_scene *s, uint32_t node,
+                                rad_face *faces, int max, int *nfaces,
+                                double *skipped_m2, rad_error *err);
+/*
+ * Sample face f (from rad_scene_node_faces) at the centres of nu x nv
+ * cells, row-major, rows along v: where a centre falls on one of the
+ * face's polygons, on[i] = 1 and pts[6 i..] is the point on the polygon
+ * and its normal (as rad_solver_query takes them); elsewhere on[i] = 0
+ * and the point is NaN.  *non counts the points on.  pts holds 6 nu nv
+ * doubles, on nu nv bytes.
+ */
+rad_status rad_scene_face_sample(const rad_scene *s, uint32_t node,
+                                 const rad_face *f, int nu, int nv, double *pts,
+                                 unsigned char *on, size_t *non,
+                                 rad_error *err);
+
+/* Light i (0 <= i < counts.lights), its name borrowed from the scene. */
+rad_status rad_scene_light_get(const rad_scene *s, uint32_t i,
+                               rad_light_desc *out, rad_error *err);
+
+/* Emitting surfaces of one node. */
+typedef struct rad_emitter {
+	uint32_t node, polygons;
+	double area_m2;
+	double exitance[3]; /* area-weighted mean, lux */
+	double flux_lm;     /* luma of exitance x area */
+} rad_emitter;
+/* The nodes with emitting polygons, in order of their first polygon:
+ * fills at most max and returns how many were filled; *more is set when
+ * further nodes emit. */
+uint32_t rad_scene_emitters(const rad_scene *s, rad_emitter *out, uint32_t max,
+                            int *more);
+
 /* Seconds on a monotonic clock (the one the statistics are timed with). */
 double rad_seconds(void);
 

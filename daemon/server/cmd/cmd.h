@@ -181,6 +181,7 @@ cmd_result cmd_unsubscribe(cmd_req *r);
 cmd_result cmd_query_points(cmd_req *r);
 cmd_result cmd_query_grid(cmd_req *r);
 cmd_result cmd_query_surfaces(cmd_req *r);
+cmd_result cmd_query_node(cmd_req *r);
 cmd_result cmd_export(cmd_req *r);
 cmd_result cmd_sensor_add(cmd_req *r);
 cmd_result cmd_sensor_list(cmd_req *r);

@@ -50,6 +50,7 @@ static cmd_result cmd_shutdown(cmd_req *r);
 #define CMD_FN_QUERY_POINTS cmd_query_points
 #define CMD_FN_QUERY_GRID cmd_query_grid
 #define CMD_FN_QUERY_SURFACES cmd_query_surfaces
+#define CMD_FN_QUERY_NODE cmd_query_node
 #define CMD_FN_EXPORT cmd_export
 #define CMD_FN_SENSOR_ADD cmd_sensor_add
 #define CMD_FN_SENSOR_LIST cmd_sensor_list
@@ -210,9 +211,9 @@ static cmd_result cmd_hello(cmd_req *r)
 	c->authed = 1;
 	srv_debug("connection %llu (%s): hello from %.100s",
 	          (unsigned long long)c->id, c->peer, client ? client : "?");
-	json_t *caps = json_pack("[sssssss]", "scene.gltf", "scene.glb",
+	json_t *caps = json_pack("[ssssssss]", "scene.gltf", "scene.glb",
 	                         "export.glb", "subscribe", "query.points",
-	                         "query.grid", "query.surfaces");
+	                         "query.grid", "query.surfaces", "query.node");
 	if (s->cfg.metrics_listen[0])
 		json_array_append_new(caps, json_string("metrics"));
 	json_t *solvers = json_array();

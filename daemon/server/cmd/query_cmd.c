@@ -1,6 +1,6 @@
 /*
- * query_cmd.c -- query.points, query.grid, query.surfaces and export, run on
- * the query threads.
+ * query_cmd.c -- query.points, query.grid, query.surfaces, query.node and
+ * export, run on the query threads.
  *
  * The I/O thread validates the request, takes a reference to the job's
  * latest published solution (a pointer copy under the job's mutex: it
@@ -25,6 +25,7 @@ typedef enum query_kind {
 	Q_POINTS = 0,
 	Q_GRID,
 	Q_SURFACES,
+	Q_NODE,
 	Q_EXPORT
 } query_kind;
 
@@ -38,6 +39,9 @@ typedef struct query_task {
 	int nu, nv;      /* grid */
 	double spacing;  /* grid */
 	int want_points; /* grid: include coordinates */
+	uint32_t node;   /* node */
+	int max_points;  /* node: the daemon's limit, checked on the pool */
+	rp_err fail;     /* node: the wire error, when not the engine's */
 	/* result */
 	unsigned char *out, *payload;
 	size_t out_len, payload_len;
@@ -136,6 +140,7 @@ static json_t *run_grid(cmd_server *d, query_task *q, double *lux,
 
 typedef struct surf_acc {
 	double area, sum, mn, mx;
+	double lo[3], hi[3]; /* bounds of the leaves */
 	uint64_t leaves;
 } surf_acc;
 
@@ -168,10 +173,17 @@ static void surf_leaf(void *ud, uint32_t node, const double p[4][3], int nv,
 	surf_acc *s = &c->acc[node];
 	if (s->leaves++ == 0) {
 		s->mn = s->mx = lux;
+		memcpy(s->lo, p[0], sizeof(s->lo));
+		memcpy(s->hi, p[0], sizeof(s->hi));
 	} else {
 		s->mn = lux < s->mn ? lux : s->mn;
 		s->mx = lux > s->mx ? lux : s->mx;
 	}
+	for (int i = 0; i < nv; i++)
+		for (int k = 0; k < 3; k++) {
+			s->lo[k] = p[i][k] < s->lo[k] ? p[i][k] : s->lo[k];
+			s->hi[k] = p[i][k] > s->hi[k] ? p[i][k] : s->hi[k];
+		}
 	s->area += area;
 	s->sum += lux * area;
 }
@@ -200,10 +212,219 @@ static json_t *run_surfaces(query_task *q, rad_error *err)
 		json_object_set_new(o, "min", ej_real(s->mn));
 		json_object_set_new(o, "mean", ej_real(s->sum / s->area));
 		json_object_set_new(o, "max", ej_real(s->mx));
+		json_object_set_new(o, "bounds",
+		                    json_pack("{s:[fff], s:[fff]}", "min",
+		                              s->lo[0], s->lo[1], s->lo[2],
+		                              "max", s->hi[0], s->hi[1],
+		                              s->hi[2]));
 		json_array_append_new(arr, o);
 	}
 	free(c.acc);
 	json_object_set_new(reply, "surfaces", arr);
+	return reply;
+}
+
+/*
+ * query.node: the node's faces (rad_scene_node_faces), each sampled on its
+ * own grid at its own EN 12464-1 spacing (or the one asked), the points on
+ * the polygons gathered in one call.  Statistics per face over its points
+ * (they carry equal areas); the node's mean weights each point by its
+ * cell's area, so a finely gridded small face does not outweigh a large
+ * one.
+ */
+#define NODE_FACES_MAX 16
+
+typedef struct node_face {
+	rad_face f;
+	int nu, nv;
+	double spacing, cell_m2;
+	size_t first, n; /* cells: first index, count */
+} node_face;
+
+typedef struct lux_stats {
+	double mn, mx, sum, w, emax;
+	size_t n;
+} lux_stats;
+
+static void stats_add(lux_stats *st, double lux, double elux, double w)
+{
+	if (st->n++ == 0)
+		st->mn = st->mx = lux;
+	st->mn = lux < st->mn ? lux : st->mn;
+	st->mx = lux > st->mx ? lux : st->mx;
+	st->sum += lux * w;
+	st->w += w;
+	st->emax = elux > st->emax ? elux : st->emax;
+}
+
+static void stats_json(json_t *o, const lux_stats *st)
+{
+	double mean = st->w > 0 ? st->sum / st->w : 0;
+	int any = st->n > 0;
+	json_object_set_new(o, "points", json_integer((json_int_t)st->n));
+	json_object_set_new(o, "min", any ? ej_real(st->mn) : json_null());
+	json_object_set_new(o, "mean", any ? ej_real(mean) : json_null());
+	json_object_set_new(o, "max", any ? ej_real(st->mx) : json_null());
+	json_object_set_new(o, "u0",
+	                    any && mean > 0 ? ej_real(st->mn / mean)
+	                                    : json_null());
+	json_object_set_new(o, "ud",
+	                    any && st->mx > 0 ? ej_real(st->mn / st->mx)
+	                                      : json_null());
+	json_object_set_new(o, "error_max",
+	                    any ? ej_real(st->emax) : json_null());
+}
+
+static json_t *vec_json(const double v[3])
+{
+	return json_pack("[fff]", v[0], v[1], v[2]);
+}
+
+/* Plan the faces' grids; the number of cells, or 0 with q->fail set. */
+static size_t node_plan(query_task *q, node_face *nf, int n, rad_error *err)
+{
+	size_t cells = 0;
+	for (int i = 0; i < n; i++) {
+		double lu = len3(nf[i].f.u), lv = len3(nf[i].f.v);
+		double sp = q->spacing > 0 ? q->spacing
+		                           : rp_grid_spacing(lu > lv ? lu : lv);
+		double nu = lu > 0 ? ceil(lu / sp) : 1;
+		double nv = lv > 0 ? ceil(lv / sp) : 1;
+		if ((double)cells + nu * nv > (double)q->max_points) {
+			q->fail = RP_ERR_BAD_REQUEST;
+			snprintf(err->msg, sizeof(err->msg),
+			         "node %u: the grids have over max_points (%d) "
+			         "points: use a larger \"spacing\"",
+			         q->node, q->max_points);
+			return 0;
+		}
+		nf[i].nu = (int)nu;
+		nf[i].nv = (int)nv;
+		nf[i].spacing = sp;
+		nf[i].cell_m2 = (lu > 0 ? lu / nu : 0) * (lv > 0 ? lv / nv : 0);
+		nf[i].first = cells;
+		nf[i].n = (size_t)nf[i].nu * (size_t)nf[i].nv;
+		cells += nf[i].n;
+	}
+	return cells;
+}
+
+/* One face of the reply: its frame, grid, values (null off the face). */
+static json_t *face_json(const node_face *nf, const unsigned char *on,
+                         const double *lux, const double *elux, lux_stats *node)
+{
+	json_t *o = json_object(), *l = json_array(), *e = json_array();
+	lux_stats st = {0};
+	for (size_t k = nf->first; k < nf->first + nf->n; k++) {
+		if (!on[k]) {
+			json_array_append_new(l, json_null());
+			json_array_append_new(e, json_null());
+			continue;
+		}
+		stats_add(&st, lux[k], elux[k], 1);
+		stats_add(node, lux[k], elux[k], nf->cell_m2);
+		json_array_append_new(l, ej_real(lux[k]));
+		json_array_append_new(e, ej_real(elux[k]));
+	}
+	json_object_set_new(o, "normal", vec_json(nf->f.normal));
+	json_object_set_new(o, "origin", vec_json(nf->f.origin));
+	json_object_set_new(o, "u", vec_json(nf->f.u));
+	json_object_set_new(o, "v", vec_json(nf->f.v));
+	json_object_set_new(o, "area", ej_real(nf->f.area_m2));
+	json_object_set_new(o, "polygons", json_integer(nf->f.polygons));
+	json_object_set_new(o, "nu", json_integer(nf->nu));
+	json_object_set_new(o, "nv", json_integer(nf->nv));
+	json_object_set_new(o, "spacing", ej_real(nf->spacing));
+	stats_json(o, &st);
+	json_object_set_new(o, "lux", l);
+	json_object_set_new(o, "error_lux", e);
+	return o;
+}
+
+/* Sample every face, gather the points on them; lux and elux per cell. */
+static int node_gather(cmd_server *d, query_task *q, const node_face *nf, int n,
+                       size_t cells, unsigned char *on, double *lux,
+                       double *elux, rad_error *err)
+{
+	const rad_scene *sc = q->sol->scene->scene;
+	double *pts = malloc(cells * 6 * sizeof(double));
+	size_t m = 0;
+	if (!pts)
+		return rad_fail(err, RAD_ERR_NOMEM,
+		                "out of memory for %zu "
+		                "points",
+		                cells);
+	for (int i = 0; i < n; i++) {
+		size_t non;
+		if (rad_scene_face_sample(sc, q->node, &nf[i].f, nf[i].nu,
+		                          nf[i].nv, pts + 6 * nf[i].first,
+		                          on + nf[i].first, &non,
+		                          err) != RAD_OK) {
+			free(pts);
+			return -1;
+		}
+	}
+	for (size_t k = 0; k < cells; k++) /* compact: the points on */
+		if (on[k])
+			memmove(pts + 6 * m++, pts + 6 * k, 6 * sizeof(double));
+	int rc = m ? srv_query_illuminance(&d->core, q->sol, pts, m, lux, elux,
+	                                   err)
+	           : RAD_OK;
+	free(pts);
+	if (rc != RAD_OK)
+		return -1;
+	for (size_t k = cells, j = m; k-- > 0;) /* spread back */
+		if (on[k]) {
+			j--;
+			lux[k] = lux[j];
+			elux[k] = elux[j];
+		}
+	return 0;
+}
+
+static json_t *run_node(cmd_server *d, query_task *q, rad_error *err)
+{
+	const rad_scene *sc = q->sol->scene->scene;
+	rad_face faces[NODE_FACES_MAX];
+	node_face nf[NODE_FACES_MAX];
+	int n;
+	double skipped;
+	if (rad_scene_node_faces(sc, q->node, faces, NODE_FACES_MAX, &n,
+	                         &skipped, err) != RAD_OK)
+		return NULL;
+	for (int i = 0; i < n; i++)
+		nf[i].f = faces[i];
+	size_t cells = node_plan(q, nf, n, err);
+	if (q->fail)
+		return NULL;
+	unsigned char *on = calloc(cells ? cells : 1, 1);
+	double *lux = malloc((cells ? 2 * cells : 1) * sizeof(double));
+	json_t *reply = NULL;
+	if (!on || !lux)
+		rad_fail(err, RAD_ERR_NOMEM, "out of memory for %zu points",
+		         cells);
+	else if (node_gather(d, q, nf, n, cells, on, lux, lux + cells, err) ==
+	         0) {
+		reply = reply_base(q);
+		json_t *arr = json_array();
+		lux_stats st = {0};
+		double area = skipped;
+		for (int i = 0; i < n; i++) {
+			json_array_append_new(arr, face_json(&nf[i], on, lux,
+			                                     lux + cells, &st));
+			area += nf[i].f.area_m2;
+		}
+		json_object_set_new(reply, "node", json_integer(q->node));
+		json_object_set_new(
+		        reply, "name",
+		        json_string(rad_scene_node_name(sc, q->node)));
+		json_object_set_new(reply, "area", ej_real(area));
+		json_object_set_new(reply, "area_skipped", ej_real(skipped));
+		stats_json(reply, &st);
+		json_object_set_new(reply, "faces", arr);
+	}
+	free(on);
+	free(lux);
 	return reply;
 }
 
@@ -246,12 +467,15 @@ static void query_run(srv *s, srv_task *t)
 		reply = run_grid(d, q, lux, &err);
 	else if (q->kind == Q_SURFACES)
 		reply = run_surfaces(q, &err);
+	else if (q->kind == Q_NODE)
+		reply = run_node(d, q, &err);
 	else if (q->kind == Q_EXPORT)
 		reply = run_export(q, &err);
 	free(lux);
 	if (!reply)
-		reply = rp_reply_error(t->id, cmd_err_from_rad(err.code), "%s",
-		                       err.msg[0] ? err.msg : "query failed");
+		reply = rp_reply_error(
+		        t->id, q->fail ? q->fail : cmd_err_from_rad(err.code),
+		        "%s", err.msg[0] ? err.msg : "query failed");
 	int rc = q->payload ? rp_frame_encode_header(reply, q->payload_len,
 	                                             &q->out, &q->out_len)
 	                    : rp_frame_encode(reply, NULL, 0, &q->out,
@@ -426,6 +650,57 @@ cmd_result cmd_query_surfaces(cmd_req *r)
 {
 	query_task *q = begin(r, Q_SURFACES);
 	return q ? submit(r, q) : CMD_ERROR;
+}
+
+/* The request's "node": a name (the first node of that name) or an
+ * index; -1 with the error set. */
+static int64_t req_node(cmd_req *r, const rad_scene *sc, uint32_t nnodes)
+{
+	json_t *v = json_object_get(r->hdr, "node");
+	if (json_is_string(v)) {
+		const char *name = json_string_value(v);
+		for (uint32_t i = 0; i < nnodes; i++)
+			if (!strcmp(rad_scene_node_name(sc, i), name))
+				return i;
+		cmd_req_fail(r, RP_ERR_NOT_FOUND, "no node named \"%.100s\"",
+		             name);
+		return -1;
+	}
+	if (!json_is_integer(v) || json_integer_value(v) < 0) {
+		cmd_req_fail(r, RP_ERR_BAD_REQUEST,
+		             "\"node\" must be a node name or a non-negative "
+		             "integer index");
+		return -1;
+	}
+	if (json_integer_value(v) >= (json_int_t)nnodes) {
+		cmd_req_fail(r, RP_ERR_NOT_FOUND,
+		             "no node %lld (the scene has %u)",
+		             (long long)json_integer_value(v), nnodes);
+		return -1;
+	}
+	return json_integer_value(v);
+}
+
+cmd_result cmd_query_node(cmd_req *r)
+{
+	double sp = 0;
+	int hs = rp_arg_double(r->hdr, "spacing", 0, &sp, &r->err);
+	if (hs < 0)
+		return CMD_ERROR;
+	if (hs == 0 && !(sp > 0))
+		return cmd_req_fail(r, RP_ERR_BAD_REQUEST,
+		                    "\"spacing\" must be > 0 (got %g)", sp);
+	query_task *q = begin(r, Q_NODE);
+	if (!q)
+		return CMD_ERROR;
+	const srv_scene *sc = q->sol->scene;
+	int64_t node = req_node(r, sc->scene, sc->counts.nodes);
+	if (node < 0)
+		return abandon(r, q);
+	q->node = (uint32_t)node;
+	q->spacing = hs == 0 ? sp : 0;
+	q->max_points = r->s->cfg.max_points;
+	return submit(r, q);
 }
 
 cmd_result cmd_export(cmd_req *r)

@@ -8,6 +8,7 @@
  * from the registry at once (status stops counting it); the engine scene
  * is freed when the last reference goes (core/scenes.c).
  */
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -135,6 +136,72 @@ static srv_scene *req_scene(cmd_req *r)
 	return sc;
 }
 
+/*
+ * scene.info's "luminaires": the scene's lights and its emitting surfaces
+ * per node, LUMINAIRES_MAX of each at most ("more" says when there were
+ * more), in the few numbers a report shows.
+ */
+#define LUMINAIRES_MAX 256
+
+static double luma3(const double c[3])
+{
+	return RAD_LUMA_R * c[0] + RAD_LUMA_G * c[1] + RAD_LUMA_B * c[2];
+}
+
+static json_t *lights_json(const rad_scene *sc, uint32_t n)
+{
+	static const char *const kinds[] = {"point", "spot", "directional"};
+	json_t *arr = json_array();
+	for (uint32_t i = 0; i < n && i < LUMINAIRES_MAX; i++) {
+		rad_light_desc l;
+		if (rad_scene_light_get(sc, i, &l, NULL) != RAD_OK)
+			break;
+		json_t *o = json_pack(
+		        "{s:s, s:s, s:f}", "name", l.name ? l.name : "", "kind",
+		        kinds[l.kind <= RAD_LIGHT_DIRECTIONAL ? l.kind : 0],
+		        l.kind == RAD_LIGHT_DIRECTIONAL ? "lux" : "candela",
+		        luma3(l.intensity));
+		if (l.kind != RAD_LIGHT_DIRECTIONAL)
+			json_object_set_new(o, "position",
+			                    json_pack("[fff]", l.position[0],
+			                              l.position[1],
+			                              l.position[2]));
+		if (l.kind != RAD_LIGHT_POINT)
+			json_object_set_new(o, "direction",
+			                    json_pack("[fff]", l.direction[0],
+			                              l.direction[1],
+			                              l.direction[2]));
+		if (l.kind == RAD_LIGHT_SPOT)
+			json_object_set_new(
+			        o, "outer_cone_deg",
+			        json_real(l.outer_cone * 180 / M_PI));
+		json_array_append_new(arr, o);
+	}
+	return arr;
+}
+
+static json_t *luminaires_json(const srv_scene *s)
+{
+	static rad_emitter em[LUMINAIRES_MAX]; /* I/O thread only */
+	int more;
+	uint32_t n = rad_scene_emitters(s->scene, em, LUMINAIRES_MAX, &more);
+	json_t *arr = json_array();
+	for (uint32_t i = 0; i < n; i++)
+		json_array_append_new(
+		        arr,
+		        json_pack("{s:i, s:s, s:i, s:f, s:f, s:f}", "node",
+		                  (int)em[i].node, "name",
+		                  rad_scene_node_name(s->scene, em[i].node),
+		                  "polygons", (int)em[i].polygons, "area",
+		                  em[i].area_m2, "exitance_lux",
+		                  luma3(em[i].exitance), "flux_lm",
+		                  em[i].flux_lm));
+	return json_pack("{s:o, s:o, s:b}", "lights",
+	                 lights_json(s->scene, s->counts.lights), "emitters",
+	                 arr, "more",
+	                 more || s->counts.lights > LUMINAIRES_MAX);
+}
+
 cmd_result cmd_scene_info(cmd_req *r)
 {
 	srv_scene *sc = req_scene(r);
@@ -148,6 +215,7 @@ cmd_result cmd_scene_info(cmd_req *r)
 	json_object_update(r->res, body);
 	json_decref(body);
 	json_object_set_new(r->res, "jobs", jobs);
+	json_object_set_new(r->res, "luminaires", luminaires_json(sc));
 	return CMD_REPLY;
 }
 
