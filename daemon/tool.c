@@ -153,6 +153,7 @@ int tool_points_load(const char *prog, const char *path, double **xyz,
 #define SCENE_COUNTERS(X)                                                      \
 	X(triangles_in) X(triangles_nonfinite) X(triangles_degenerate)         \
 	X(triangles_duplicate) X(polygons) X(polygons_cut) X(quads)            \
+	X(back_faces)                                                          \
 	X(materials) X(materials_offered) X(lights) X(emitters) X(nodes)
 #define IMPORT_COUNTERS(X)                                                     \
 	X(meshes) X(primitives) X(primitives_skipped) X(textures_ignored)      \

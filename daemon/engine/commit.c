@@ -113,7 +113,7 @@ static int forms_parallelogram(const rad_scene *s, uint32_t t, int k,
 {
 	const rad_poly *pt = &s->polys[t], *pu = &s->polys[u];
 	if (rad_scene_merge_key(s, t) != rad_scene_merge_key(s, u) ||
-	    pt->node != pu->node)
+	    pt->node != pu->node || pt->side != pu->side)
 		return 0;
 	if (v3_dot(v3_f(pt->n), v3_f(pu->n)) < 1.0 - MERGE_COPLANAR)
 		return 0;
@@ -323,6 +323,59 @@ static rad_status merge_quads(rad_scene *s, rad_error *err)
 	return drop_unused_materials(s, err);
 }
 
+/* ---------------------------------------------------------- back faces */
+
+/*
+ * The back face of each two-sided polygon: the same sheet turned over (e1
+ * and e2 swapped, the normal negated), appended after every polygon the
+ * BVH holds.  Both faces are polygons to the solvers, each with its own
+ * elements and radiosity; the sheet is in the BVH once, and s->twin leads
+ * a hit from behind to the back face.
+ */
+static rad_status make_back_faces(rad_scene *s, rad_error *err)
+{
+	uint32_t nf = s->npolys, nb = 0;
+	for (uint32_t i = 0; i < nf; i++)
+		nb += s->polys[i].side == RAD_SIDE_FRONT;
+	if (nb == 0)
+		return RAD_OK;
+	if (nb > RAD_SCENE_MAX_IDS - nf)
+		return rad_fail(err, RAD_ERR_LIMIT,
+		                "commit: %u polygons and %u back faces are "
+		                "more than %u",
+		                nf, nb, RAD_SCENE_MAX_IDS);
+	uint32_t *twin =
+	        rad_mem_alloc(&s->mem, RAD_MEM_GEOMETRY, nf * sizeof(*twin));
+	rad_poly *polys =
+	        twin ? rad_mem_realloc(&s->mem, RAD_MEM_GEOMETRY, s->polys,
+	                               (size_t)(nf + nb) * sizeof(*polys))
+	             : NULL;
+	if (!polys) {
+		rad_mem_free(&s->mem, RAD_MEM_GEOMETRY, twin);
+		return rad_fail(err, RAD_ERR_NOMEM,
+		                "commit: out of memory for %u back faces", nb);
+	}
+	s->polys = polys;
+	uint32_t k = nf;
+	for (uint32_t i = 0; i < nf; i++) {
+		twin[i] = RAD_NONE;
+		if (polys[i].side != RAD_SIDE_FRONT)
+			continue;
+		rad_poly b = polys[i];
+		memcpy(b.e1, polys[i].e2, sizeof(b.e1));
+		memcpy(b.e2, polys[i].e1, sizeof(b.e2));
+		for (int c = 0; c < 3; c++)
+			b.n[c] = -b.n[c];
+		b.side = RAD_SIDE_BACK;
+		polys[k] = b;
+		twin[i] = k++;
+	}
+	s->npolys = s->cap_polys = k;
+	s->counts.back_faces = nb;
+	s->twin = twin;
+	return RAD_OK;
+}
+
 /* -------------------------------------------------------- bounds and flux */
 
 static void grow_bounds(rad_scene *s, v3 p)
@@ -425,7 +478,10 @@ rad_status rad_scene_commit(rad_scene *s, rad_error *err)
 	if (s->stage && (st = merge_quads(s, err)))
 		return st;
 	compute_bounds(s);
-	if ((st = rad_scene_conform(s, err)))
+	/* A commit retried after the BVH failed has done these already. */
+	if (!s->twin && (st = rad_scene_conform(s, err)))
+		return st;
+	if (!s->twin && (st = make_back_faces(s, err)))
 		return st;
 	compute_totals(s);
 	if ((st = rad_vis_build(s, err)))
@@ -445,6 +501,7 @@ void rad_scene_free(rad_scene *s)
 	rad_mem_free(&s->mem, RAD_MEM_GEOMETRY, s->polys);
 	rad_mem_free(&s->mem, RAD_MEM_GEOMETRY, s->stage);
 	rad_mem_free(&s->mem, RAD_MEM_GEOMETRY, s->stage_base);
+	rad_mem_free(&s->mem, RAD_MEM_GEOMETRY, s->twin);
 	rad_mem_free(&s->mem, RAD_MEM_MATERIALS, s->mats);
 	rad_scene_material_index_free(s);
 	for (uint32_t i = 0; i < s->nlights; i++) {

@@ -30,7 +30,7 @@
 
 /* Ids stay far below RAD_NONE and the tag bits of hier.h; the edge map
  * (4 slots per triangle) fits 32-bit indices. */
-#define MAX_IDS (1u << 28)
+#define MAX_IDS RAD_SCENE_MAX_IDS
 
 rad_status rad_scene_new(rad_scene **out, rad_error *err)
 {
@@ -339,10 +339,12 @@ static rad_status start_stage_base(rad_scene *s, rad_error *err)
 	return RAD_OK;
 }
 
-static rad_status add_triangles(rad_scene *s, uint32_t material, uint32_t node,
-                                const double *xyz, const double *rho,
-                                size_t ntri, rad_error *err)
+rad_status rad_scene_add_surface(rad_scene *s, const rad_surface_desc *d,
+                                 rad_error *err)
 {
+	uint32_t material = d->material, node = d->node;
+	const double *xyz = d->xyz, *rho = d->rho;
+	size_t ntri = d->ntri;
 	rad_status st = rad_scene_check_open(s, "triangles", err);
 	if (st)
 		return st;
@@ -390,6 +392,7 @@ static rad_status add_triangles(rad_scene *s, uint32_t material, uint32_t node,
 		}
 		p->mat = material;
 		p->node = node;
+		p->side = d->two_sided ? RAD_SIDE_FRONT : RAD_SIDE_ONE;
 		if (rho) {
 			rad_material m = s->mats[material];
 			for (int c = 0; c < 3; c++)
@@ -410,7 +413,8 @@ rad_status rad_scene_add_triangles(rad_scene *s, uint32_t material,
                                    uint32_t node, const double *xyz,
                                    size_t ntri, rad_error *err)
 {
-	return add_triangles(s, material, node, xyz, NULL, ntri, err);
+	rad_surface_desc d = {material, node, xyz, NULL, ntri, 0};
+	return rad_scene_add_surface(s, &d, err);
 }
 
 rad_status rad_scene_add_triangles_rho(rad_scene *s, uint32_t material,
@@ -421,7 +425,8 @@ rad_status rad_scene_add_triangles_rho(rad_scene *s, uint32_t material,
 	if (ntri && !rho)
 		return rad_fail(err, RAD_ERR_INVALID,
 		                "triangles: NULL reflectances for %zu", ntri);
-	return add_triangles(s, material, node, xyz, rho, ntri, err);
+	rad_surface_desc d = {material, node, xyz, rho, ntri, 0};
+	return rad_scene_add_surface(s, &d, err);
 }
 
 /* ---------------------------------------------------------------- lights */
@@ -564,5 +569,6 @@ rad_status rad_scene_polygon_get(const rad_scene *s, uint32_t i,
 	}
 	out->area = p->area;
 	out->node = p->node;
+	out->back_face = p->side == RAD_SIDE_BACK;
 	return RAD_OK;
 }

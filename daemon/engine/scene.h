@@ -44,7 +44,15 @@ typedef struct rad_poly {
 	uint32_t mat;              /* index into the material table */
 	uint32_t node;             /* index into the node name table */
 	uint8_t quad;              /* 1 = parallelogram, 0 = triangle */
+	uint8_t side;              /* rad_side */
 } rad_poly;
+
+/* Which faces of its sheet a polygon is. */
+enum rad_side {
+	RAD_SIDE_ONE = 0, /* one-sided: the back absorbs */
+	RAD_SIDE_FRONT,   /* the front of a two-sided sheet (in the BVH) */
+	RAD_SIDE_BACK     /* its back face (not in the BVH: s->twin) */
+};
 
 /*
  * A point light's goniometric table (gonio.c), one LIGHTS block: the
@@ -91,6 +99,10 @@ struct rad_scene {
 	                 input vertices, 9 per polygon, so that quad
 	                 merging finds shared edges by exact match */
 
+	uint32_t *twin;       /* GEOMETRY, after commit; NULL when no polygon is
+	                         two-sided: per polygon, its back face's index
+	                         (RAD_NONE for none), so that hits from behind
+	                         find it */
 	uint32_t *stage_base; /* GEOMETRY, until commit; NULL until a
 	                         triangle comes with its own reflectance:
 	                         per polygon, what quad merging matches
@@ -118,9 +130,14 @@ struct rad_scene {
 	rad_vis *vis; /* BVH over the polygons, after commit */
 };
 
+/* Ids (polygons, materials, nodes) stay far below RAD_NONE and the tag
+ * bits of hier.h; the edge map (4 slots per triangle) fits 32-bit
+ * indices. */
+#define RAD_SCENE_MAX_IDS (1u << 28)
+
 /* Stage bases of triangles offered with their own reflectance: the
  * material they came with, offset so they never match a plain one. */
-#define RAD_TEXTURED_BASE (1u << 28)
+#define RAD_TEXTURED_BASE RAD_SCENE_MAX_IDS
 
 /* Triangles t and u may merge into a quad only if these agree. */
 static inline uint32_t rad_scene_merge_key(const rad_scene *s, uint32_t t)

@@ -49,6 +49,7 @@ struct rad_vis {
 	float *verts;         /* shared vertex buffer, padded */
 	uint32_t *tris;       /* shared index buffer, 3 per triangle */
 	uint32_t *prim_poly;  /* Embree primitive -> scene polygon */
+	const uint32_t *twin; /* the scene's back faces (scene.h), or NULL */
 	double eps;           /* trimming distance, metres */
 	char embree_msg[200]; /* last message of the error callback */
 };
@@ -83,6 +84,8 @@ static void fill_buffers(rad_vis *v, const rad_scene *s)
 	for (uint32_t i = 0; i < s->npolys; i++) {
 		const rad_poly *p = &s->polys[i];
 		int corners = p->quad ? 4 : 3;
+		if (p->side == RAD_SIDE_BACK) /* its sheet is there */
+			continue;
 		v3_store_f(v->verts + 3 * (size_t)nv, rad_poly_point(p, 0, 0));
 		v3_store_f(v->verts + 3 * (size_t)nv + 3,
 		           rad_poly_point(p, 1, 0));
@@ -135,6 +138,8 @@ static rad_status alloc_buffers(rad_vis *v, const rad_scene *s,
 {
 	size_t nv = 0, nt = 0;
 	for (uint32_t i = 0; i < s->npolys; i++) {
+		if (s->polys[i].side == RAD_SIDE_BACK)
+			continue;
 		nv += s->polys[i].quad ? 4 : 3;
 		nt += s->polys[i].quad ? 2 : 1;
 	}
@@ -219,6 +224,7 @@ rad_status rad_vis_build(rad_scene *s, rad_error *err)
 		return st;
 	}
 	v->eps = trim_eps(s);
+	v->twin = s->twin;
 	s->vis = v;
 	return RAD_OK;
 }
@@ -422,9 +428,15 @@ uint32_t rad_vis_first_hit_front(const rad_vis *v, v3 org, v3 dir, double tnear,
 	/* A back face wins only when it lies clearly before the front. */
 	if (fc.back_t < INFINITY &&
 	    (!hit || (double)fc.back_t < (double)rh.ray.tfar - v->eps)) {
+		uint32_t poly = v->prim_poly[fc.back_prim];
 		*t = fc.back_t;
+		/* The back of a two-sided sheet is a face of its own. */
+		if (v->twin && v->twin[poly] != RAD_NONE) {
+			*front = 1;
+			return v->twin[poly];
+		}
 		*front = 0;
-		return v->prim_poly[fc.back_prim];
+		return poly;
 	}
 	*front = hit;
 	*t = hit ? rh.ray.tfar : tfar;

@@ -116,6 +116,7 @@ typedef struct sio_doc_material {
 	double base_color[3]; /* baseColorFactor RGB (tinygltf's default) */
 	double emissive[3];   /* emissiveFactor */
 	double metallic;      /* metallicFactor */
+	int double_sided;     /* doubleSided */
 	unsigned textures;    /* texture references (of the five kinds) */
 	/* baseColorTexture: texture index (-1: none) and UV set; its
 	 * KHR_texture_transform, the identity when absent. */

@@ -341,6 +341,7 @@ sio_doc_material view_material(const tinygltf::Material &mat)
 		c.emissive[k] = mat.emissiveFactor[k];
 	}
 	c.metallic = pbr.metallicFactor;
+	c.double_sided = mat.doubleSided;
 	c.textures = (pbr.baseColorTexture.index >= 0) +
 	             (pbr.metallicRoughnessTexture.index >= 0) +
 	             (mat.normalTexture.index >= 0) +

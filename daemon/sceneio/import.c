@@ -65,6 +65,7 @@ typedef struct prim {
 	int flip;            /* the world matrix mirrors: swap corners */
 	uint32_t mat, node;  /* engine ids */
 	sio_prim_tex tex;    /* tex.tex NULL: the material's reflectance */
+	int two_sided;       /* the material is doubleSided */
 } prim;
 
 /* Read POSITION and transform it to world space: *out malloc'ed. */
@@ -107,11 +108,10 @@ static rad_status flush(sio_import *im, const prim *p)
 	if (n == 0)
 		return RAD_OK;
 	im->nbatch = 0;
-	if (p->tex.tex)
-		return rad_scene_add_triangles_rho(
-		        im->s, p->mat, p->node, im->batch, im->rho, n, im->err);
-	return rad_scene_add_triangles(im->s, p->mat, p->node, im->batch, n,
-	                               im->err);
+	rad_surface_desc d = {p->mat,    p->node,
+	                      im->batch, p->tex.tex ? im->rho : NULL,
+	                      n,         p->two_sided};
+	return rad_scene_add_surface(im->s, &d, im->err);
 }
 
 /* How many triangles the primitive makes, checked. */
@@ -198,7 +198,7 @@ static rad_status add_primitive(sio_import *im, int mi, size_t pi,
 		return rad_fail(im->err, RAD_ERR_INVALID,
 		                "%s: no POSITION attribute", where);
 	prim p = {where, gp->mode, NULL, 0, NULL, sio_mat_det3(w) < 0,
-	          0,     node,     {0}};
+	          0,     node,     {0},  0};
 	sio_view view, idx;
 	double *pos = NULL;
 	rad_status st =
@@ -216,6 +216,9 @@ static rad_status add_primitive(sio_import *im, int mi, size_t pi,
 		st = sio_material_id(im, gp->material, where, &p.mat);
 	if (st == RAD_OK)
 		st = sio_material_texture(im, gp->material, where, gp, &p.tex);
+	p.two_sided = gp->material >= 0 &&
+	              gp->material < (int64_t)im->d->nmaterials &&
+	              im->d->materials[gp->material].double_sided;
 	if (st == RAD_OK)
 		st = emit_triangles(im, &p);
 	if (st == RAD_OK && im->info)

@@ -31,6 +31,7 @@
 
 #include <cmocka.h>
 
+#include "closed_forms.h"
 #include "rad.h"
 
 #define PANEL_L 1000.0 /* panel luminance, cd/m2 */
@@ -39,20 +40,6 @@
 #define ROOM_Z 3.0
 
 /* ---------------------------------------------------- analytic references */
-
-static double ff_corner(double a, double b, double h)
-{
-	double A = a / h, B = b / h;
-	double sa = sqrt(1 + A * A), sb = sqrt(1 + B * B);
-	return (A / sa * atan(B / sa) + B / sb * atan(A / sb)) / (2 * M_PI);
-}
-
-/* Point at the origin, normal +z; rectangle [x1,x2] x [y1,y2] at z = h. */
-static double ff_parallel(double x1, double x2, double y1, double y2, double h)
-{
-	return ff_corner(x2, y2, h) - ff_corner(x1, y2, h) -
-	       ff_corner(x2, y1, h) + ff_corner(x1, y1, h);
-}
 
 /*
  * Point at the origin, normal +z; rectangle in the plane x = c (c > 0)

@@ -347,6 +347,21 @@ static char *textured_doc(const char *texinfo, const char *images,
 	return subst(doc, "\"materials\":[", buf);
 }
 
+static void test_double_sided_adds_back_faces(void **state)
+{
+	(void)state;
+	char *doc = subst(quad_doc(), "\"name\":\"Lamp\",",
+	                  "\"name\":\"Lamp\",\"doubleSided\":true,");
+	rad_scene_counts c = load_counts(doc);
+	assert_int_equal(c.polygons, 2); /* the square and its back */
+	assert_int_equal(c.back_faces, 1);
+	assert_int_equal(c.emitters, 2); /* it shines both ways */
+	free(doc);
+	c = load_counts(quad_doc());
+	assert_int_equal(c.polygons, 1);
+	assert_int_equal(c.back_faces, 0);
+}
+
 static void test_textures_read_or_explained(void **state)
 {
 	(void)state;
@@ -928,6 +943,7 @@ int main(void)
 	        cmocka_unit_test(test_mirroring_keeps_the_front_side),
 	        cmocka_unit_test(test_materials_default_clamp_and_counters),
 	        cmocka_unit_test(test_textures_read_or_explained),
+	        cmocka_unit_test(test_double_sided_adds_back_faces),
 	        cmocka_unit_test(test_nan_and_degenerate_triangles_are_counted),
 	        cmocka_unit_test(test_punctual_lights_are_placed_and_aimed),
 	        cmocka_unit_test(test_bad_lights_are_refused_by_name),

@@ -37,6 +37,7 @@
 
 #include <cmocka.h>
 
+#include "closed_forms.h"
 #include "mem.h"
 #include "rad.h"
 #include "scene.h"
@@ -333,20 +334,6 @@ static void test_point_light_reflected_by_floor(void **state)
 }
 
 /* ---------------------------------------------------------- area source */
-
-static double ff_corner(double a, double b, double h)
-{
-	double A = a / h, B = b / h;
-	double sa = sqrt(1 + A * A), sb = sqrt(1 + B * B);
-	return (A / sa * atan(B / sa) + B / sb * atan(A / sb)) / (2 * M_PI);
-}
-
-/* Point at the origin, normal +z; rectangle [x1,x2] x [y1,y2] at z = h. */
-static double ff_parallel(double x1, double x2, double y1, double y2, double h)
-{
-	return ff_corner(x2, y2, h) - ff_corner(x1, y2, h) -
-	       ff_corner(x2, y1, h) + ff_corner(x1, y1, h);
-}
 
 /* A square panel of side a centred over the origin at height h, facing
  * down, luminance lum; nothing else in the scene. */

@@ -184,6 +184,8 @@ typedef struct rad_scene_counts {
 	uint32_t polygons_cut;         /* large polygons cut where another
 	                                  surface runs across them */
 	uint32_t quads;                /* of which parallelograms */
+	uint32_t back_faces;           /* of which the back faces of
+	                                  two-sided polygons */
 	uint32_t materials;            /* distinct materials stored */
 	uint32_t materials_offered;    /* materials offered (before sharing) */
 	uint32_t lights;
@@ -231,6 +233,27 @@ rad_status rad_scene_add_triangles_rho(rad_scene *s, uint32_t material,
                                        const double *rho, size_t ntri,
                                        rad_error *err);
 
+/* Triangles of one material and node, in full (the calls above are
+ * this with rho NULL and one-sided). */
+typedef struct rad_surface_desc {
+	uint32_t material, node;
+	const double *xyz; /* 9 per triangle, as rad_scene_add_triangles */
+	const double *rho; /* NULL, or 3 per triangle: their reflectance */
+	size_t ntri;
+	/*
+	 * 1: each triangle reflects (and emits) on both sides: a wall, a
+	 * partition, a ceiling panel modelled as one sheet.  Its back face is
+	 * a polygon of its own for the solvers (counted in back_faces: it
+	 * has its own elements and radiosity), while the BVH holds the sheet
+	 * once: what hits it from behind meets the back face, and nothing
+	 * passes through.
+	 */
+	int two_sided;
+} rad_surface_desc;
+
+rad_status rad_scene_add_surface(rad_scene *s, const rad_surface_desc *d,
+                                 rad_error *err);
+
 rad_status rad_scene_add_light(rad_scene *s, const rad_light_desc *light,
                                rad_error *err);
 
@@ -253,6 +276,7 @@ typedef struct rad_polygon_desc {
 	double normal[3];     /* unit, front side */
 	double area;          /* m2 */
 	uint32_t node;        /* rad_scene_node_name() */
+	int back_face;        /* the back face of a two-sided polygon */
 	double reflectance[3];
 	double luminance[3]; /* cd/m2 */
 } rad_polygon_desc;
