@@ -58,13 +58,8 @@ static rad_status attach_light(void *ud, const char *node, rad_light_desc *d,
 			                "--luminaire %s: light '%s' is not a "
 			                "point light",
 			                spec, d->name ? d->name : node);
-		double top = fmax(d->intensity[0],
-		                  fmax(d->intensity[1], d->intensity[2]));
-		for (int c = 0; c < 3; c++)
-			d->intensity[c] = top > 0 ? d->intensity[c] / top : 1;
-		d->candela = pho_table_grid(a->table[k]);
 		a->used[k] = 1;
-		return RAD_OK;
+		return pho_light_set(a->table[k], d, err);
 	}
 	return RAD_OK;
 }
@@ -158,6 +153,7 @@ int tool_points_load(const char *prog, const char *path, double **xyz,
 #define IMPORT_COUNTERS(X)                                                     \
 	X(meshes) X(primitives) X(primitives_skipped) X(textures_ignored)      \
 	X(textures_read) X(images_decoded) X(textured_triangles)               \
+	X(photometric_lights)                                                  \
 	X(metallic_materials)
 /* clang-format on */
 

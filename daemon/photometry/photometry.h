@@ -104,6 +104,15 @@ double pho_candela(const pho_table *t, double c_deg, double gamma_deg);
  * over the sphere (rad_candela_flux). */
 double pho_lumens(const pho_table *t);
 
+/*
+ * Make d (a point light) the luminaire t: its candela table (borrowed:
+ * t must live until d is added to a scene, which copies it), its
+ * intensity the RGB factor of its colour with the largest channel 1
+ * (white for a black light), so that the file's candela are what it
+ * gives.  RAD_ERR_INVALID if d is not a point light.
+ */
+rad_status pho_light_set(const pho_table *t, rad_light_desc *d, rad_error *err);
+
 /* Short name of a status ("invalid"...). */
 const char *pho_status_name(pho_status st);
 

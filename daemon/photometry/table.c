@@ -157,3 +157,16 @@ const char *pho_status_name(pho_status st)
 	}
 	return "?";
 }
+
+rad_status pho_light_set(const pho_table *t, rad_light_desc *d, rad_error *err)
+{
+	if (d->kind != RAD_LIGHT_POINT)
+		return rad_fail(err, RAD_ERR_INVALID,
+		                "a photometric file needs a point light");
+	double top =
+	        fmax(d->intensity[0], fmax(d->intensity[1], d->intensity[2]));
+	for (int c = 0; c < 3; c++)
+		d->intensity[c] = top > 0 ? d->intensity[c] / top : 1;
+	d->candela = &t->grid;
+	return RAD_OK;
+}

@@ -54,6 +54,9 @@ enum {
 #define SIO_STRENGTH_EXT "KHR_materials_emissive_strength"
 #define SIO_TRANSFORM_EXT "KHR_texture_transform"
 #define SIO_SENSOR_EXTRA "luxrad_sensor" /* key in a node's extras */
+/* A node's photometric file: a path beside the scene, which packing
+ * (pack.h) turns into {"bufferView": n, "name": path}. */
+#define SIO_PHOTOMETRY_EXTRA "luxrad_photometry"
 
 typedef struct sio_str {
 	const char *s; /* NUL-terminated at len */
@@ -201,6 +204,11 @@ rad_status sio_doc_node_light(const sio_doc *d, int ni, sio_val *tag,
 /* Node ni's extras.luxrad_sensor: ABSENT, STRING or OTHER. */
 rad_status sio_doc_node_sensor(const sio_doc *d, int ni, sio_val *tag,
                                sio_str *name, rad_error *err);
+/* Node ni's extras.luxrad_photometry: ABSENT, STRING (a path: name),
+ * NUMBER (packed: view is its bufferView, name the path it had) or
+ * OTHER. */
+rad_status sio_doc_node_photometry(const sio_doc *d, int ni, sio_val *tag,
+                                   double *view, sio_str *name, rad_error *err);
 /* Material mi's KHR_materials_emissive_strength.emissiveStrength:
  * ABSENT (no extension or no member), NUMBER or OTHER. */
 rad_status sio_doc_material_strength(const sio_doc *d, int mi, sio_val *tag,

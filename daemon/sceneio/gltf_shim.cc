@@ -695,6 +695,31 @@ extern "C" rad_status sio_doc_node_sensor(const sio_doc *d, int ni,
 	});
 }
 
+extern "C" rad_status sio_doc_node_photometry(const sio_doc *d, int ni,
+                                              sio_val *tag, double *view,
+                                              sio_str *name, rad_error *err)
+{
+	const tinygltf::Node &n = d->own->m.nodes[(size_t)ni];
+	*tag = SIO_VAL_ABSENT;
+	return guarded(err, IMPORT, [&] {
+		if (!n.extras.IsObject() || !n.extras.Has(SIO_PHOTOMETRY_EXTRA))
+			return RAD_OK;
+		const tinygltf::Value &v = n.extras.Get(SIO_PHOTOMETRY_EXTRA);
+		*tag = SIO_VAL_OTHER;
+		if (v.IsString()) {
+			*tag = SIO_VAL_STRING;
+			*name = str(v.Get<std::string>());
+		} else if (v.IsObject() && v.Has("bufferView") &&
+		           v.Get("bufferView").IsNumber()) {
+			*tag = SIO_VAL_NUMBER;
+			*view = v.Get("bufferView").GetNumberAsDouble();
+			if (v.Has("name") && v.Get("name").IsString())
+				*name = str(v.Get("name").Get<std::string>());
+		}
+		return RAD_OK;
+	});
+}
+
 extern "C" rad_status sio_doc_material_strength(const sio_doc *d, int mi,
                                                 sio_val *tag, double *strength,
                                                 rad_error *err)

@@ -21,6 +21,7 @@
 #include <string.h>
 
 #include "internal.h"
+#include "photometry.h"
 
 #define BATCH_TRIANGLES 1024 /* per rad_scene_add_triangles call */
 
@@ -315,9 +316,62 @@ static rad_status light_values(const sio_import *im, int li, rad_light_desc *d)
 }
 
 /* A light placed by node ni: lights shine down their local -Z. */
+/*
+ * The photometric file node ni carries (extras.luxrad_photometry, packed
+ * into a bufferView), made d's candela table; *t is freed once d is
+ * added (the scene copies the table).
+ */
+static rad_status node_photometry(sio_import *im, int ni, rad_light_desc *d,
+                                  pho_table **t)
+{
+	sio_val tag;
+	double view = -1;
+	sio_str name = {"", 0};
+	rad_status st =
+	        sio_doc_node_photometry(im->d, ni, &tag, &view, &name, im->err);
+	if (st != RAD_OK || tag == SIO_VAL_ABSENT)
+		return st;
+	const char *node = sio_node_name(im->d, ni);
+	if (tag == SIO_VAL_STRING)
+		return rad_fail(
+		        im->err, RAD_ERR_INVALID,
+		        "node %d '%s': photometric file '%.80s' is not "
+		        "in the scene: a scene sent as bytes carries its "
+		        "files (luxrad submit and the tools pack a .gltf "
+		        "with the files beside it)",
+		        ni, node, name.s);
+	if (tag != SIO_VAL_NUMBER || !(view >= 0 && view <= INT32_MAX) ||
+	    view != floor(view))
+		return rad_fail(im->err, RAD_ERR_INVALID,
+		                "node %d '%s': extras.%s must name a file "
+		                "beside the scene",
+		                ni, node, SIO_PHOTOMETRY_EXTRA);
+	char where[192], msg[256];
+	snprintf(where, sizeof where, "node %d '%s': %s '%s'", ni, node,
+	         SIO_PHOTOMETRY_EXTRA, name.s);
+	const unsigned char *b;
+	size_t len;
+	st = sio_view_bytes(im->d, where, (int)view, &b, &len, im->err);
+	if (st != RAD_OK)
+		return st;
+	pho_status ps =
+	        pho_parse((const char *)b, len, NULL, t, msg, sizeof msg);
+	if (ps != PHO_OK)
+		return rad_fail(im->err,
+		                ps == PHO_ERR_NOMEM ? RAD_ERR_NOMEM
+		                : ps == PHO_ERR_UNSUPPORTED
+		                        ? RAD_ERR_UNSUPPORTED
+		                        : RAD_ERR_INVALID,
+		                "%s: %s", where, msg);
+	if (im->info)
+		im->info->photometric_lights++;
+	return sio_blame(im->err, pho_light_set(*t, d, im->err), where);
+}
+
 static rad_status add_light(sio_import *im, int ni, int li, const sio_mat4 *w)
 {
 	rad_light_desc d = {0};
+	pho_table *table = NULL;
 	rad_status st = light_values(im, li, &d);
 	if (st != RAD_OK)
 		return st;
@@ -337,10 +391,15 @@ static rad_status add_light(sio_import *im, int ni, int li, const sio_mat4 *w)
 	         sio_node_name(im->d, ni));
 	const char *node =
 	        im->d->nodes[ni].name.len ? im->d->nodes[ni].name.s : "";
-	if (im->hook && (st = im->hook(im->hook_ud, node, &d, im->err)))
-		return sio_blame(im->err, st, label);
-	return sio_blame(im->err, rad_scene_add_light(im->s, &d, im->err),
-	                 label);
+	st = node_photometry(im, ni, &d, &table);
+	if (st == RAD_OK && im->hook &&
+	    (st = im->hook(im->hook_ud, node, &d, im->err)))
+		st = sio_blame(im->err, st, label);
+	if (st == RAD_OK)
+		st = sio_blame(im->err, rad_scene_add_light(im->s, &d, im->err),
+		               label);
+	pho_free(table);
+	return st;
 }
 
 /* ---------------------------------------------------------- the import */

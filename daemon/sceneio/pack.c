@@ -158,19 +158,25 @@ static int has_dotdot(const char *path)
 	return 0;
 }
 
-static const char *kind_name(int image)
+/* What a uri belongs to: a buffer, an image, a node (its photometric
+ * file, extras.luxrad_photometry). */
+enum { KIND_BUFFER, KIND_IMAGE, KIND_NODE };
+
+static const char *kind_name(int kind)
 {
-	return image ? "image" : "buffer";
+	return kind == KIND_IMAGE  ? "image"
+	       : kind == KIND_NODE ? "node"
+	                           : "buffer";
 }
 
 /* Read the file a relative uri names, inside the scene's folder: exactly
  * need bytes (need > 0), or all of it up to IMAGE_MAX (need == 0). */
-static rad_status read_relative(packer *pk, int image, size_t idx,
+static rad_status read_relative(packer *pk, int kind, size_t idx,
                                 const char *uri, size_t need,
                                 unsigned char **out, size_t *len)
 {
 	char rel[PATH_MAX], full[2 * PATH_MAX + 2], real[PATH_MAX];
-	const char *what = kind_name(image);
+	const char *what = kind_name(kind);
 	if (uri_decode(uri, rel, sizeof(rel)) != 0)
 		return rad_fail(pk->err, RAD_ERR_INVALID,
 		                "%s %zu: uri '%.80s' is not a valid path", what,
@@ -205,8 +211,8 @@ static rad_status read_relative(packer *pk, int image, size_t idx,
 		        idx, rel, (long long)sb.st_size, need);
 	if (!need && (uint64_t)sb.st_size > IMAGE_MAX)
 		return rad_fail(pk->err, RAD_ERR_LIMIT,
-		                "image %zu: '%.80s' is larger than 1 GiB", idx,
-		                rel);
+		                "%s %zu: '%.80s' is larger than 1 GiB", what,
+		                idx, rel);
 	FILE *f = fopen(real, "rb");
 	if (!f)
 		return rad_fail(pk->err, RAD_ERR_IO,
@@ -237,12 +243,12 @@ static int b64val(int c)
 }
 
 /* Decode a base64 data: URI; *mime gets its media type (may be ""). */
-static rad_status read_data_uri(packer *pk, int image, size_t idx,
+static rad_status read_data_uri(packer *pk, int kind, size_t idx,
                                 const char *uri, char *mime, size_t mimelen,
                                 unsigned char **out, size_t *len)
 {
 	const char *comma = strchr(uri, ',');
-	const char *what = kind_name(image);
+	const char *what = kind_name(kind);
 	size_t head = comma ? (size_t)(comma - uri) : 0;
 	if (!comma || head < 12 || strncmp(comma - 7, ";base64", 7) != 0)
 		return rad_fail(pk->err, RAD_ERR_INVALID,
@@ -284,22 +290,24 @@ static rad_status read_data_uri(packer *pk, int image, size_t idx,
 /* The bytes a uri names: a data: URI, or a file beside the scene (need
  * bytes of it; all of it for an image, need 0).  *mime: the data: URI's
  * media type, else "". */
-static rad_status read_uri(packer *pk, int image, size_t idx, const char *uri,
+static rad_status read_uri(packer *pk, int kind, size_t idx, const char *uri,
                            size_t need, char *mime, size_t mimelen,
                            unsigned char **out, size_t *len)
 {
 	mime[0] = '\0';
 	if (strncmp(uri, "data:", 5) == 0)
-		return read_data_uri(pk, image, idx, uri, mime, mimelen, out,
+		return read_data_uri(pk, kind, idx, uri, mime, mimelen, out,
 		                     len);
 	if (has_scheme(uri))
 		return rad_fail(pk->err, RAD_ERR_INVALID,
 		                "%s %zu: uri '%.80s' is not read: only data: "
 		                "URIs and files beside the scene",
-		                kind_name(image), idx, uri);
-	rad_status st = read_relative(pk, image, idx, uri, need, out, len);
-	if (!st && image)
+		                kind_name(kind), idx, uri);
+	rad_status st = read_relative(pk, kind, idx, uri, need, out, len);
+	if (!st && kind == KIND_IMAGE)
 		pk->info.images_read++;
+	else if (!st && kind == KIND_NODE)
+		pk->info.photometry_read++;
 	else if (!st)
 		pk->info.buffers_read++;
 	return st;
@@ -366,7 +374,7 @@ static rad_status pack_buffers(packer *pk, json_t *buffers, size_t **base)
 		char mime[64];
 		rad_status st = RAD_OK;
 		if (bl > 0 || strncmp(uri, "data:", 5) == 0)
-			st = read_uri(pk, 0, i, uri, (size_t)bl, mime,
+			st = read_uri(pk, KIND_BUFFER, i, uri, (size_t)bl, mime,
 			              sizeof(mime), &bytes, &len);
 		if (!st && len < (size_t)bl) {
 			free(bytes);
@@ -416,6 +424,28 @@ static const char *mime_of(const char *uri, const char *mime)
 	return NULL;
 }
 
+/* Bytes appended to the chunk under a new bufferView, *view its index. */
+static rad_status add_view(packer *pk, json_t *root, const unsigned char *b,
+                           size_t len, json_int_t *view)
+{
+	size_t at = 0;
+	rad_status st = bin_append(pk, b, len, &at);
+	if (st)
+		return st;
+	json_t *views = json_object_get(root, "bufferViews");
+	if (!views) {
+		views = json_array();
+		json_object_set_new(root, "bufferViews", views);
+	}
+	json_t *v = json_object();
+	json_object_set_new(v, "buffer", json_integer(0));
+	json_object_set_new(v, "byteOffset", json_integer((json_int_t)at));
+	json_object_set_new(v, "byteLength", json_integer((json_int_t)len));
+	*view = (json_int_t)json_array_size(views);
+	json_array_append_new(views, v);
+	return RAD_OK;
+}
+
 /* Images with a uri: their bytes into the chunk, a bufferView each. */
 static rad_status pack_images(packer *pk, json_t *root)
 {
@@ -426,38 +456,59 @@ static rad_status pack_images(packer *pk, json_t *root)
 		if (!uri)
 			continue;
 		unsigned char *bytes = NULL;
-		size_t len = 0, at = 0;
+		size_t len = 0;
 		char mime[64];
-		rad_status st = read_uri(pk, 1, i, uri, 0, mime, sizeof(mime),
-		                         &bytes, &len);
+		rad_status st = read_uri(pk, KIND_IMAGE, i, uri, 0, mime,
+		                         sizeof(mime), &bytes, &len);
 		const char *type = st ? NULL : mime_of(uri, mime);
 		if (!st && !type)
 			st = rad_fail(pk->err, RAD_ERR_UNSUPPORTED,
 			              "image %zu: '%.80s' is neither PNG nor "
 			              "JPEG",
 			              i, uri);
+		json_int_t view = 0;
 		if (!st)
-			st = bin_append(pk, bytes, len, &at);
+			st = add_view(pk, root, bytes, len, &view);
 		free(bytes);
 		if (st)
 			return st;
-		json_t *views = json_object_get(root, "bufferViews");
-		if (!views) {
-			views = json_array();
-			json_object_set_new(root, "bufferViews", views);
-		}
-		json_t *v = json_object();
-		json_object_set_new(v, "buffer", json_integer(0));
-		json_object_set_new(v, "byteOffset",
-		                    json_integer((json_int_t)at));
-		json_object_set_new(v, "byteLength",
-		                    json_integer((json_int_t)len));
-		json_object_set_new(
-		        im, "bufferView",
-		        json_integer((json_int_t)json_array_size(views)));
-		json_array_append_new(views, v);
+		json_object_set_new(im, "bufferView", json_integer(view));
 		json_object_set_new(im, "mimeType", json_string(type));
 		json_object_del(im, "uri");
+	}
+	return RAD_OK;
+}
+
+/*
+ * Photometric files named by nodes (extras.luxrad_photometry: a path
+ * beside the scene): their bytes into the chunk, the path replaced by
+ * {"bufferView": n, "name": path}, which the importer reads.
+ */
+static rad_status pack_photometry(packer *pk, json_t *root)
+{
+	json_t *nodes = json_object_get(root, "nodes");
+	for (size_t i = 0; i < json_array_size(nodes); i++) {
+		json_t *extras =
+		        json_object_get(json_array_get(nodes, i), "extras");
+		json_t *ref = json_object_get(extras, "luxrad_photometry");
+		const char *uri = json_string_value(ref);
+		if (!uri)
+			continue;
+		unsigned char *bytes = NULL;
+		size_t len = 0;
+		char mime[64];
+		json_int_t view = 0;
+		rad_status st = read_uri(pk, KIND_NODE, i, uri, 0, mime,
+		                         sizeof(mime), &bytes, &len);
+		if (!st)
+			st = add_view(pk, root, bytes, len, &view);
+		free(bytes);
+		if (st)
+			return st;
+		json_t *packed = json_object();
+		json_object_set_new(packed, "bufferView", json_integer(view));
+		json_object_set_new(packed, "name", json_string(uri));
+		json_object_set_new(extras, "luxrad_photometry", packed);
 	}
 	return RAD_OK;
 }
@@ -535,7 +586,7 @@ rad_status sio_pack(const unsigned char *json, size_t len, const char *dir,
 	if ((st = pack_buffers(&pk, buffers, &base)) ||
 	    (st = move_views(&pk, json_object_get(root, "bufferViews"), base,
 	                     nbuffers)) ||
-	    (st = pack_images(&pk, root)))
+	    (st = pack_images(&pk, root)) || (st = pack_photometry(&pk, root)))
 		goto done;
 	if (nbuffers || pk.nbin) {
 		json_t *one = json_object();

@@ -17,15 +17,19 @@
 
 /* What packing did, for the scene's report. */
 typedef struct sio_pack_info {
-	unsigned buffers_read; /* buffers read from files beside the scene */
-	unsigned images_read;  /* images read from files beside the scene */
-	unsigned data_uris;    /* buffers and images decoded from data: URIs */
+	unsigned buffers_read;    /* buffers read from files beside the scene */
+	unsigned images_read;     /* images read from files beside the scene */
+	unsigned photometry_read; /* photometric files named by nodes
+	                             (extras.luxrad_photometry) */
+	unsigned data_uris; /* buffers and images decoded from data: URIs */
 } sio_pack_info;
 
 /*
  * Pack a glTF JSON document (json, len bytes) into a GLB (*glb, malloc'ed,
  * *glb_len bytes): every buffer becomes part of the one binary chunk,
- * every image with a uri gets a bufferView there.  URIs are data: URIs or
+ * every image with a uri gets a bufferView there, and so does every
+ * photometric file a node names in extras.luxrad_photometry (which
+ * becomes {"bufferView": n, "name": the path}).  URIs are data: URIs or
  * relative paths read from dir, the scene's folder: no scheme, no
  * absolute path, no "..", nothing that resolves (symbolic links
  * followed) outside dir.  info may be NULL.  RAD_ERR_INVALID names the

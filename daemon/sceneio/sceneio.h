@@ -42,6 +42,8 @@ typedef struct sio_info {
 	uint32_t images_decoded;     /* image decodes (once each, unless the
 	                                memory budget evicted one) */
 	uint32_t textured_triangles; /* triangles given a texture's mean */
+	uint32_t photometric_lights; /* lights given a photometric file by
+	                                their node's extras */
 	uint32_t metallic_materials; /* metallicFactor > 0 (treated diffuse) */
 	char warnings[512];          /* tinygltf warnings, truncated */
 } sio_info;

@@ -435,6 +435,25 @@ assert ev[-1]["event"] == "state" and ev[-1]["state"] == "done", ev[-1]
 assert any(e["event"] == "iteration" for e in ev), ev
 ' "$TMP/out" "$J3"
 
+# A luminaire whose photometric file its node names, beside the scene:
+# the client packs the file with the scene, the daemon reads the floor
+# under it as the file says (I0 = 1000/pi cd, 3 m up: I0 / 9 lux).
+mkdir -p "$TMP/lum"
+cp "$ROOT/tests/data/photometry/cosine_1000lm.ies" "$TMP/lum/down.ies"
+"$PY" "$(dirname "$0")/lamp_scene.py" "$TMP/lum/lamp.gltf" down.ies
+run submit "$TMP/lum/lamp.gltf" --solve --threads 1 --name luminaire
+expect_exit "submit a scene whose node names its IES file" 0
+LUMJOB=$(cat "$TMP/out")
+run watch "$LUMJOB"
+printf '0 0 0 0 1 0\n' >"$TMP/lum/pt.txt"
+run query "$LUMJOB" --points "$TMP/lum/pt.txt" --json
+check_py "the daemon reads the floor under the IES file (I0 / 9)" '
+import json, math, sys
+lux = json.load(open(sys.argv[1]))["lux"][0]
+want = 1000 / math.pi / 9
+assert abs(lux - want) <= 0.005 * want, (lux, want)
+' "$TMP/out"
+
 # submit --solve: upload, create, run; prints the job id.
 run submit "$SCENE" --solve --eps 0.05 --threads 1 --name solved
 expect_exit "submit --solve" 0

@@ -4,13 +4,15 @@
 #
 # Usage: test_luminaire_cli.sh LUXRAD_REFERENCE LUXRAD_SOLVE REPO_ROOT
 #
-# The scene (written here): a black 20 m floor (y = 0, facing up) and a
+# The scene (lamp_scene.py): a black 20 m floor (y = 0, facing up) and a
 # point light node "lamp" 3 m above it, aimed down (local -Z to -Y),
 # glTF intensity 50 cd.  With --luminaire lamp=cosine_1000lm.ies (I =
 # (1000 / pi) cos(gamma) cd) the floor reads the file, not the glTF:
 # 35.368 lux below (I0 / 9), 8.842 lux at 45 degrees (I0 / 36), within
 # 0.5 %, from both tools.  An unknown NAME, a malformed value, a missing
-# and a malformed file are refused with the usual exit codes.
+# and a malformed file are refused with the usual exit codes.  The same
+# lamp naming its file in its node's extras (luxrad_photometry) reads the
+# same, the file packed with the scene.
 set -u
 
 REF=${1:?usage: test_luminaire_cli.sh REFERENCE SOLVE REPO_ROOT}
@@ -25,33 +27,7 @@ PROGRAM="$REF"
 # shellcheck source=tap.sh
 source "$(dirname "$0")/tap.sh"
 
-"$PY" - "$TMP/lamp.gltf" <<'PYEOF'
-import base64, json, struct, sys
-v = [-10, 0, -10, -10, 0, 10, 10, 0, 10, -10, 0, -10, 10, 0, 10, 10, 0, -10]
-buf = struct.pack("<18f", *v)
-doc = {
-    "asset": {"version": "2.0"}, "scene": 0,
-    "extensionsUsed": ["KHR_lights_punctual"],
-    "extensions": {"KHR_lights_punctual": {"lights": [
-        {"type": "point", "intensity": 50, "color": [1, 1, 1]}]}},
-    "scenes": [{"nodes": [0, 1]}],
-    "nodes": [{"name": "floor", "mesh": 0},
-              {"name": "lamp", "translation": [0, 3, 0],
-               "rotation": [-0.70710678, 0, 0, 0.70710678],
-               "extensions": {"KHR_lights_punctual": {"light": 0}}}],
-    "meshes": [{"primitives": [{"attributes": {"POSITION": 0},
-                                "material": 0}]}],
-    "materials": [{"pbrMetallicRoughness": {
-        "baseColorFactor": [0, 0, 0, 1]}}],
-    "accessors": [{"bufferView": 0, "componentType": 5126, "count": 6,
-                   "type": "VEC3", "min": [-10, 0, -10],
-                   "max": [10, 0, 10]}],
-    "bufferViews": [{"buffer": 0, "byteLength": len(buf)}],
-    "buffers": [{"byteLength": len(buf), "uri":
-                 "data:application/octet-stream;base64," +
-                 base64.b64encode(buf).decode()}]}
-open(sys.argv[1], "w").write(json.dumps(doc))
-PYEOF
+"$PY" "$(dirname "$0")/lamp_scene.py" "$TMP/lamp.gltf"
 printf '0 0 0 0 1 0\n3 0 0 0 1 0\n' >"$TMP/floor.pts"
 printf 'IESNA:LM-63-2002\nTILT=NONE\n1 1000 1 2 1 1 2 0 0 0\n1 1 1\n0 90\n0\n10 x\n' \
 	>"$TMP/bad.ies"
@@ -91,6 +67,28 @@ run "$TMP/lamp.gltf" --points "$TMP/floor.pts" --luminaire "lamp=$TMP/none.ies"
 expect_exit "a missing file is refused" 1 "none.ies"
 run "$TMP/lamp.gltf" --points "$TMP/floor.pts" --luminaire "lamp=$TMP/bad.ies"
 expect_exit "a malformed file names its line" 1 "line 7: candela value 2"
+# The same lamp naming its file in the node's extras, beside the scene:
+# both tools pack it with the scene, as luxrad submit does.
+mkdir "$TMP/extras"
+cp "$IES" "$TMP/extras/downlight.ies"
+"$PY" "$(dirname "$0")/lamp_scene.py" "$TMP/extras/lamp.gltf" downlight.ies
+for prog in "$REF" "$SOLVE"; do
+	PROGRAM="$prog"
+	extra=()
+	[[ $prog == "$REF" ]] && extra=(--samples 2)
+	run "$TMP/extras/lamp.gltf" --points "$TMP/floor.pts" --json "${extra[@]}"
+	expect_exit "$(basename "$prog"): extras.luxrad_photometry runs" 0
+	check_lux "$(basename "$prog"): the floor reads the file the node names"
+done
+"$PY" "$(dirname "$0")/lamp_scene.py" "$TMP/extras/missing.gltf" none.ies
+run "$TMP/extras/missing.gltf" --points "$TMP/floor.pts"
+expect_exit "a node's missing photometric file is refused" 1 \
+	"node 1: 'none.ies' not found beside the scene"
+cp "$TMP/bad.ies" "$TMP/extras/none.ies"
+run "$TMP/extras/missing.gltf" --points "$TMP/floor.pts"
+expect_exit "a node's malformed photometric file names node and line" 1 \
+	"node 1 'lamp': luxrad_photometry 'none.ies': line 7"
+
 run --help
 if grep -q -- "--luminaire NAME=FILE" "$TMP/out"; then
 	pass "--help lists --luminaire"
