@@ -525,12 +525,11 @@ static double spot_factor(const rad_light *L, v3 to_x)
 	return t * t;
 }
 
-/* Unoccluded irradiance per unit intensity at x (normal nx). */
-static double light_geometry(const rad_light *L, v3 x, v3 nx)
+/* Unoccluded irradiance per unit intensity at x (normal nx) from a
+ * positional light L placed at pos. */
+static double light_from(const rad_light *L, v3 pos, v3 x, v3 nx)
 {
-	if (L->kind == RAD_LIGHT_DIRECTIONAL)
-		return fmax(0.0, -v3_dot(v3_d(L->dir), nx));
-	v3 d = v3_sub(v3_d(L->pos), x);
+	v3 d = v3_sub(pos, x);
 	double d2 = v3_dot(d, d);
 	if (!(d2 > 0))
 		return 0;
@@ -543,6 +542,52 @@ static double light_geometry(const rad_light *L, v3 x, v3 nx)
 	else if (L->gonio)
 		e *= rad_gonio_factor(L->gonio, v3_scale(d, -1.0 / dist));
 	return e;
+}
+
+/*
+ * A luminous opening as a grid of cells, each a point source with its
+ * share of the intensity.  A cell of size s seen from distance r gives an
+ * error of about (s / r)^2 / 6 against the exact area integral (measured
+ * on a Lambertian 1.2 x 0.2 m opening: 0.7 % at s / r = 0.2), so cells
+ * are OPENING_CELL_REL of the distance to the opening's nearest part, at
+ * most OPENING_CELLS a side: a receiver far away costs one cell.
+ * Visibility is tested from the centre (rad_light_point).
+ */
+#define OPENING_CELL_REL 0.17
+#define OPENING_CELLS 16
+
+static int opening_cells(double size, double dist)
+{
+	if (!(dist > 0))
+		return size > 0 ? OPENING_CELLS : 1;
+	double k = ceil(size / (OPENING_CELL_REL * dist));
+	return !(k > 1) ? 1 : k < OPENING_CELLS ? (int)k : OPENING_CELLS;
+}
+
+static double light_geometry(const rad_light *L, v3 x, v3 nx)
+{
+	if (L->kind == RAD_LIGHT_DIRECTIONAL)
+		return fmax(0.0, -v3_dot(v3_d(L->dir), nx));
+	if (!rad_light_has_opening(L))
+		return light_from(L, v3_d(L->pos), x, nx);
+	/* Cells are sized by the distance to the opening's nearest part. */
+	double half = 0.5 * hypot(L->opening[0], L->opening[1]);
+	double near = v3_len(v3_sub(v3_d(L->pos), x)) - half;
+	int k0 = opening_cells(L->opening[0], near);
+	int k1 = opening_cells(L->opening[1], near);
+	double sum = 0;
+	int n = 0;
+	for (int i = 0; i < k0; i++)
+		for (int j = 0; j < k1; j++) {
+			double u = (i + 0.5) / k0 - 0.5,
+			       v = (j + 0.5) / k1 - 0.5;
+			if (L->opening_round && u * u + v * v > 0.25)
+				continue;
+			sum += light_from(L, rad_light_opening_point(L, u, v),
+			                  x, nx);
+			n++;
+		}
+	return n ? sum / n : light_from(L, v3_d(L->pos), x, nx);
 }
 
 double rad_light_point(const rad_vis *vis, const rad_light *L, v3 x, v3 nx,

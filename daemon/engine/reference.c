@@ -252,7 +252,45 @@ static double cone_falloff(const rad_light *L, double cos_axis)
 }
 
 /* Illuminance per unit intensity at x (unit normal n), shadows included. */
-static double light_at(const tracer *tr, const rad_light *L, v3 x, v3 n)
+static double light_at_pos(const tracer *tr, const rad_light *L, v3 pos, v3 x,
+                           v3 n);
+
+/*
+ * A luminous opening, sampled apart from the solvers' cells: with r, one
+ * point uniform over it (a disk by rejection), an unbiased estimate; on
+ * the first visit of a query point (r NULL), the mean over a fine grid
+ * (OPENING_GRID a side), each sample with its own visibility.
+ */
+#define OPENING_GRID 24
+
+static double opening_at(const tracer *tr, const rad_light *L, v3 x, v3 n,
+                         rng *r)
+{
+	if (r) {
+		double u, v;
+		do {
+			u = rng_next(r) - 0.5;
+			v = rng_next(r) - 0.5;
+		} while (L->opening_round && u * u + v * v > 0.25);
+		return light_at_pos(tr, L, rad_light_opening_point(L, u, v), x,
+		                    n);
+	}
+	double sum = 0;
+	int m = 0;
+	for (int i = 0; i < OPENING_GRID; i++)
+		for (int j = 0; j < OPENING_GRID; j++) {
+			double u = (i + 0.5) / OPENING_GRID - 0.5;
+			double v = (j + 0.5) / OPENING_GRID - 0.5;
+			if (L->opening_round && u * u + v * v > 0.25)
+				continue;
+			sum += light_at_pos(
+			        tr, L, rad_light_opening_point(L, u, v), x, n);
+			m++;
+		}
+	return sum / m;
+}
+
+static double light_at(const tracer *tr, const rad_light *L, v3 x, v3 n, rng *r)
 {
 	if (L->kind == RAD_LIGHT_DIRECTIONAL) {
 		v3 to = v3_scale(v3_d(L->dir), -1.0);
@@ -261,7 +299,16 @@ static double light_at(const tracer *tr, const rad_light *L, v3 x, v3 n)
 			return 0.0;
 		return c;
 	}
-	v3 pos = v3_d(L->pos), d = v3_sub(pos, x);
+	if (rad_light_has_opening(L))
+		return opening_at(tr, L, x, n, r);
+	return light_at_pos(tr, L, v3_d(L->pos), x, n);
+}
+
+/* A positional light L shining from pos. */
+static double light_at_pos(const tracer *tr, const rad_light *L, v3 pos, v3 x,
+                           v3 n)
+{
+	v3 d = v3_sub(pos, x);
 	double dist = v3_len(d);
 	if (!(dist > 0))
 		return 0.0;
@@ -278,8 +325,9 @@ static double light_at(const tracer *tr, const rad_light *L, v3 x, v3 n)
 	return e;
 }
 
-/* Sum over the punctual and directional lights, RGB lux, into e. */
-static void lights_at(const tracer *tr, v3 x, v3 n, double e[3])
+/* Sum over the punctual and directional lights, RGB lux, into e (r as
+ * opening_at). */
+static void lights_at(const tracer *tr, v3 x, v3 n, rng *r, double e[3])
 {
 	e[0] = e[1] = e[2] = 0.0;
 	for (uint32_t i = 0; i < tr->s->nlights; i++) {
@@ -287,7 +335,7 @@ static void lights_at(const tracer *tr, v3 x, v3 n, double e[3])
 		if (!(L->intensity[0] > 0 || L->intensity[1] > 0 ||
 		      L->intensity[2] > 0))
 			continue;
-		double g = light_at(tr, L, x, n);
+		double g = light_at(tr, L, x, n, r);
 		for (int c = 0; c < 3; c++)
 			e[c] += g * L->intensity[c];
 	}
@@ -346,7 +394,7 @@ static void direct_at(const tracer *tr, const vertex *v, const double *beta,
 	if (v->is_point || tr->s->nlights == 0)
 		return;
 	double e[3];
-	lights_at(tr, v->x, v->n, e);
+	lights_at(tr, v->x, v->n, r, e);
 	for (int c = 0; c < 3; c++)
 		sum[c] += beta[c] * v->a[c] / M_PI * e[c];
 }
@@ -678,7 +726,7 @@ static void init_points(const tracer *tr, const double *pts, size_t n,
 		ps->x = v3_d(pts + 6 * i);
 		ps->n = v3_norm(v3_d(pts + 6 * i + 3));
 		double e[3];
-		lights_at(tr, ps->x, ps->n, e);
+		lights_at(tr, ps->x, ps->n, NULL, e);
 		ps->direct = luma3(e);
 		ps->pending = first;
 	}

@@ -467,6 +467,12 @@ static rad_status check_light(const rad_light_desc *d, uint32_t which,
 		return rad_fail(err, RAD_ERR_INVALID,
 		                "light %u: a candela table needs a point light",
 		                which);
+	if (d->candela && !(d->opening[0] >= 0 && d->opening[0] < 1e3 &&
+	                    d->opening[1] >= 0 && d->opening[1] < 1e3))
+		return rad_fail(err, RAD_ERR_INVALID,
+		                "light %u: luminous opening %g x %g m must be "
+		                "finite, >= 0 and under 1 km",
+		                which, d->opening[0], d->opening[1]);
 	if (d->kind == RAD_LIGHT_POINT && !d->candela)
 		return RAD_OK;
 	v3 dir = v3_d(d->direction);
@@ -490,6 +496,11 @@ rad_status rad_scene_add_light(rad_scene *s, const rad_light_desc *d,
 	          s->nlights + 1, sizeof(*s->lights)))
 		return rad_fail(err, RAD_ERR_NOMEM, "light: out of memory");
 	rad_light L = {.kind = d->kind, .range = d->range};
+	if (d->candela) {
+		L.opening[0] = d->opening[0];
+		L.opening[1] = d->opening_round ? d->opening[0] : d->opening[1];
+		L.opening_round = d->opening_round != 0;
+	}
 	if (d->candela &&
 	    (st = rad_gonio_new(&s->mem, d, s->nlights, &L.gonio, err)))
 		return st;

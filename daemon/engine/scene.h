@@ -79,7 +79,29 @@ typedef struct rad_light {
 	double cos_inner, cos_outer; /* spot cone, cosines */
 	char *name;                  /* may be NULL */
 	rad_gonio *gonio;            /* LIGHTS; NULL = no table */
+	double opening[2]; /* with gonio: luminous opening, metres (along
+	                      axis0, axis90; a disk of diameter opening[0]
+	                      if round); 0, 0: a point */
+	int opening_round;
 } rad_light;
+
+/*
+ * The point of light L's opening at (u, v) in [-1/2, 1/2]^2 (its centre at
+ * 0, 0); a round opening is the disk inscribed in that square.
+ */
+static inline v3 rad_light_opening_point(const rad_light *L, double u, double v)
+{
+	const rad_gonio *g = L->gonio;
+	double l = L->opening[0], w = L->opening_round ? l : L->opening[1];
+	return v3_add(v3_d(L->pos), v3_add(v3_scale(v3_d(g->axis0), u * l),
+	                                   v3_scale(v3_d(g->axis90), v * w)));
+}
+
+/* 1 if L has an opening (more than a point). */
+static inline int rad_light_has_opening(const rad_light *L)
+{
+	return L->gonio && (L->opening[0] > 0 || L->opening[1] > 0);
+}
 
 /* Copy d->candela (checked) into a new LIGHTS block of mem. */
 rad_status rad_gonio_new(rad_mem *mem, const rad_light_desc *d, uint32_t which,

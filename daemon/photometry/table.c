@@ -168,5 +168,10 @@ rad_status pho_light_set(const pho_table *t, rad_light_desc *d, rad_error *err)
 	for (int c = 0; c < 3; c++)
 		d->intensity[c] = top > 0 ? d->intensity[c] / top : 1;
 	d->candela = &t->grid;
+	/* The opening's height (luminous sides) is not modelled: the
+	 * table radiates from the opening's plane. */
+	d->opening[0] = fabs(t->info.opening_m[0]);
+	d->opening[1] = fabs(t->info.opening_m[1]);
+	d->opening_round = t->info.opening_circular;
 	return RAD_OK;
 }

@@ -25,6 +25,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "closed_forms.h"
 #include "photometry.h"
 #include "photometry_data.h"
 #include "rad.h"
@@ -288,6 +289,105 @@ static void test_candela_lights_are_checked_and_counted(void **state)
 	pho_free(t);
 }
 
+/*
+ * An area luminaire: a 1.2 x 0.2 m opening whose table is I0 cos(gamma)
+ * is a Lambertian rectangle of luminance I0 / A, so the floor under it
+ * reads L pi F, F the closed form of a point facing a parallel rectangle
+ * (closed_forms.h).  Checked 0.4 m, 1 m and 2.5 m below, under the
+ * centre and off it, for the solver and the Monte Carlo reference (which
+ * samples the opening its own way); the same table as a point source is
+ * far off near the luminaire.
+ */
+static void test_area_luminaire_matches_the_closed_form(void **state)
+{
+	(void)state;
+	enum { NG = 181 };
+	static double c_deg[1] = {0}, g_deg[NG], cd[NG];
+	const double I0 = 1000, len = 1.2, wid = 0.2;
+	for (int k = 0; k < NG; k++) {
+		g_deg[k] = k;
+		cd[k] = k <= 90 ? I0 * cos(k * M_PI / 180) : 0;
+	}
+	cd[90] = 0;
+	const rad_candela_grid grid = {1, NG, c_deg, g_deg, cd};
+	static const double heights[] = {0.4, 1.0, 2.5};
+	static const double at[][2] = {{0, 0}, {0.5, 0.1}, {1.0, -0.3}};
+	for (size_t h = 0; h < sizeof heights / sizeof heights[0]; h++) {
+		double H = heights[h], worst = 0, worst_point = 0;
+		for (int area = 0; area <= 1; area++) {
+			rad_scene *s;
+			rad_error err;
+			const double black[3] = {0, 0, 0};
+			uint32_t mat, node;
+			assert_int_equal(rad_scene_new(&s, &err), RAD_OK);
+			assert_int_equal(rad_scene_add_material(s, black, black,
+			                                        &mat, &err),
+			                 RAD_OK);
+			assert_int_equal(
+			        rad_scene_add_node(s, "floor", &node, &err),
+			        RAD_OK);
+			const double p[3] = {-20, -20, 0}, e1[3] = {40, 0, 0},
+			             e2[3] = {0, 40, 0};
+			quad(s, mat, node, p, e1, e2);
+			rad_light_desc L = {
+			        .kind = RAD_LIGHT_POINT,
+			        .position = {0, 0, H},
+			        .direction = {0, 0, -1},
+			        .intensity = {1, 1, 1},
+			        .candela = &grid,
+			        .c0_axis = {1, 0, 0},
+			        .opening = {area ? len : 0, area ? wid : 0}};
+			assert_int_equal(rad_scene_add_light(s, &L, &err),
+			                 RAD_OK);
+			assert_int_equal(rad_scene_commit(s, &err), RAD_OK);
+			double pts[3 * 6], lux[3], ref[3];
+			for (int k = 0; k < 3; k++) {
+				const double q[6] = {at[k][0], at[k][1], 0,
+				                     0,        0,        1};
+				memcpy(pts + 6 * k, q, sizeof q);
+			}
+			rad_solver *sv = solver_on(s);
+			assert_int_equal(rad_solver_query(sv, pts, 3, 0, lux,
+			                                  NULL, &err),
+			                 RAD_OK);
+			rad_solver_free(sv);
+			rad_ref_options ro;
+			rad_ref_options_default(&ro);
+			ro.samples = 64;
+			assert_int_equal(
+			        rad_reference_illuminance(s, pts, 3, &ro, ref,
+			                                  NULL, NULL, &err),
+			        RAD_OK);
+			for (int k = 0; k < 3; k++) {
+				double x = at[k][0], y = at[k][1];
+				double want =
+				        I0 / (len * wid) * M_PI *
+				        ff_parallel(-len / 2 - x, len / 2 - x,
+				                    -wid / 2 - y, wid / 2 - y,
+				                    H);
+				double e = fabs(lux[k] - want) / want;
+				if (!area) {
+					worst_point = fmax(worst_point, e);
+					continue;
+				}
+				worst = fmax(worst, e);
+				if (e > 0.01 ||
+				    fabs(ref[k] - want) > 0.01 * want)
+					fail_msg("%g m below, point %d: solver "
+					         "%g, reference %g, closed "
+					         "form %g lux",
+					         H, k, lux[k], ref[k], want);
+			}
+			rad_scene_free(s);
+		}
+		print_message("area luminaire %.1f m above: worst %.3f %% "
+		              "(as a point: %.1f %%)\n",
+		              H, 100 * worst, 100 * worst_point);
+		if (H < 1)
+			assert_true(worst_point > 0.1); /* a point is not it */
+	}
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -295,6 +395,7 @@ int main(void)
 	        cmocka_unit_test(
 	                test_walls_round_the_luminaire_take_its_lumens),
 	        cmocka_unit_test(test_candela_lights_are_checked_and_counted),
+	        cmocka_unit_test(test_area_luminaire_matches_the_closed_form),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }

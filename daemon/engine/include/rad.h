@@ -171,6 +171,12 @@ typedef struct rad_light_desc {
 	                      perpendicular to direction); C = 90 is
 	                      c0_axis x direction.  May be zero when
 	                      candela->nc is 1 */
+	/* With candela: the luminous opening, metres: its length along
+	 * C = 0 and width along C = 90 (a rectangle), or with opening_round
+	 * a disk of diameter opening[0]; 0, 0: a point.  The intensity is
+	 * spread evenly over it, each part radiating the table. */
+	double opening[2];
+	int opening_round;
 } rad_light_desc;
 
 typedef struct rad_scene_counts {
