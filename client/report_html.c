@@ -172,7 +172,8 @@ static void luminaires(FILE *f, const json_t *scene)
 	}
 	if (json_array_size(lights) > 0) {
 		fputs("<table><tr><th>Light</th><th>Kind</th><th>Intensity"
-		      "</th><th>Position (m)</th></tr>\n",
+		      "</th><th>Flux (lm)</th><th>Opening (m)</th>"
+		      "<th>Position (m)</th></tr>\n",
 		      f);
 		json_array_foreach(lights, i, x)
 		{
@@ -186,6 +187,17 @@ static void luminaires(FILE *f, const json_t *scene)
 				lx_html_num(f, x, "lux", "%.4g lux");
 			else
 				lx_html_num(f, x, "candela", "%.4g cd");
+			fputs("</td><td class=\"n\">", f);
+			if (json_object_get(x, "lumens"))
+				lx_html_num(f, x, "lumens", "%.4g");
+			fputs("</td><td class=\"n\">", f);
+			const json_t *op = json_object_get(x, "opening_m");
+			double o0 = json_number_value(json_array_get(op, 0));
+			double o1 = json_number_value(json_array_get(op, 1));
+			if (json_is_true(json_object_get(x, "opening_round")))
+				fprintf(f, "&#8960; %.3g", o0);
+			else if (o0 > 0 || o1 > 0)
+				fprintf(f, "%.3g &times; %.3g", o0, o1);
 			fputs("</td><td class=\"n\">", f);
 			for (size_t k = 0; k < json_array_size(p); k++)
 				fprintf(f, "%s%.3f", k ? ", " : "",

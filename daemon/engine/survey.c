@@ -261,6 +261,16 @@ rad_status rad_scene_light_get(const rad_scene *s, uint32_t i,
 		out->outer_cone = acos(fmin(1, fmax(-1, l->cos_outer)));
 	}
 	out->name = l->name;
+	if (l->gonio) { /* as it was given: an RGB factor on the table */
+		double peak = l->gonio->peak_cd;
+		for (int c = 0; c < 3; c++)
+			out->intensity[c] =
+			        peak > 0 ? l->intensity[c] / peak : 0;
+		out->candela = &l->gonio->grid;
+		memcpy(out->c0_axis, l->gonio->axis0, sizeof(out->c0_axis));
+		memcpy(out->opening, l->opening, sizeof(out->opening));
+		out->opening_round = l->opening_round;
+	}
 	return RAD_OK;
 }
 

@@ -453,6 +453,16 @@ lux = json.load(open(sys.argv[1]))["lux"][0]
 want = 1000 / math.pi / 9
 assert abs(lux - want) <= 0.005 * want, (lux, want)
 ' "$TMP/out"
+run report "$LUMJOB" -o "$TMP/lum/report.html"
+expect_exit "report on the luminaire's job" 0
+check_py "the report lists the photometric luminaire and its lumens" '
+import re, sys
+html = open(sys.argv[1]).read()
+row = re.search(r"<tr><td>[^<]*</td><td>photometric</td>(.*?)</tr>", html)
+assert row, "no photometric row"
+cells = re.findall(r"<td[^>]*>([^<]*)</td>", row.group(1))
+assert abs(float(cells[1]) - 1000) <= 5, cells
+' "$TMP/lum/report.html"
 
 # submit --solve: upload, create, run; prints the job id.
 run submit "$SCENE" --solve --eps 0.05 --threads 1 --name solved

@@ -175,6 +175,22 @@ static json_t *lights_json(const rad_scene *sc, uint32_t n)
 			json_object_set_new(
 			        o, "outer_cone_deg",
 			        json_real(l.outer_cone * 180 / M_PI));
+		if (l.candela) { /* a photometric file's table */
+			double k = luma3(l.intensity);
+			json_object_set_new(o, "kind",
+			                    json_string("photometric"));
+			json_object_set_new(
+			        o, "candela",
+			        json_real(k * rad_candela_peak(l.candela)));
+			json_object_set_new(
+			        o, "lumens",
+			        json_real(k * rad_candela_flux(l.candela)));
+			json_object_set_new(
+			        o, "opening_m",
+			        json_pack("[ff]", l.opening[0], l.opening[1]));
+			json_object_set_new(o, "opening_round",
+			                    json_boolean(l.opening_round));
+		}
 		json_array_append_new(arr, o);
 	}
 	return arr;
