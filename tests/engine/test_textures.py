@@ -385,6 +385,28 @@ def main():
         lin = ((128 / 255 + 0.055) / 1.055) ** 2.4
         compare(solve, path, "uniform", tmp,
                 expect_exact=[0.5 * lin, lin, 0.25 * lin])
+        # Damaged images: each loads with a note or is refused, never
+        # crashes (the decoders see hostile bytes; CI runs this under
+        # ASan).
+        rng = np.random.default_rng(7)
+        for label, img in (("png", png), ("jpeg", cases[4][1])):
+            worst = 0
+            for k in range(24):
+                b = bytearray(img)
+                if k % 3 == 2:
+                    b = b[:int(rng.integers(8, len(b)))]
+                else:
+                    for _ in range(1 + k % 4):
+                        at = int(rng.integers(0, len(b)))
+                        b[at] ^= int(rng.integers(1, 256))
+                path = os.path.join(tmp, "damaged.gltf")
+                made_scene(path, bytes(b), "image/" + label, 2.0)
+                rc = subprocess.run([solve, path, "--iterations", "1"],
+                                    stdout=subprocess.DEVNULL,
+                                    stderr=subprocess.DEVNULL).returncode
+                worst = max(worst, rc if rc >= 0 else 128 - rc)
+            check(worst <= 1, "damaged %s images: 24 load or are refused, "
+                  "none crashes (worst exit %d)" % (label, worst))
         for d in ("BJS-2.79-Cycles-gltf", "BJS-2.80-Eevee-gltf"):
             folder = os.path.join(real, "vinc3r-cornellbox", d)
             if not os.path.isdir(folder):
