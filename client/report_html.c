@@ -133,6 +133,13 @@ static void scene_table(FILE *f, const json_t *scene)
 	row_num(f, "Polygons", c, "polygons", "%.0f");
 	row_num(f, "Nodes", c, "nodes", "%.0f");
 	row_num(f, "Materials", c, "materials", "%.0f");
+	row_num(f, "Back faces (two-sided)", c, "back_faces", "%.0f");
+	const json_t *tex = json_object_get(scene, "textures");
+	row_num(f, "Textured materials", tex, "read", "%.0f");
+	row_num(f, "Textured triangles", tex, "textured_triangles", "%.0f");
+	const char *warn = lx_jstr(scene, "warnings");
+	if (warn && *warn)
+		row_text(f, "Importer notes", warn);
 	fputs("<tr><th>Extent (m)</th><td class=\"n\">", f);
 	for (int k = 0; k < 3; k++)
 		fprintf(f, "%s%.3f", k ? " &times; " : "",
