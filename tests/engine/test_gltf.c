@@ -357,9 +357,11 @@ static void test_double_sided_adds_back_faces(void **state)
 	assert_int_equal(c.back_faces, 1);
 	assert_int_equal(c.emitters, 2); /* it shines both ways */
 	free(doc);
-	c = load_counts(quad_doc());
+	doc = quad_doc();
+	c = load_counts(doc);
 	assert_int_equal(c.polygons, 1);
 	assert_int_equal(c.back_faces, 0);
+	free(doc);
 }
 
 static void test_textures_read_or_explained(void **state)
