@@ -9,7 +9,10 @@
  * 8 bytes, and every bufferView's byteOffset moves by its buffer's
  * place; images read from a uri are appended after them with a
  * bufferView each and their mimeType (glTF allows PNG and JPEG there:
- * from the data: URI's media type or the file's extension).
+ * from the data: URI's media type or the file's extension), and named by
+ * their uri when they had no name, so that the loader's messages name
+ * the file.  A Git LFS pointer where a buffer should be is refused by
+ * that name (a clone without git-lfs has those in place of .bin files).
  *
  * A path is refused before anything is opened when it has a scheme,
  * starts with '/', or has a ".." segment once percent-decoded; what is
@@ -93,6 +96,25 @@ rad_status sio_file_read(const char *path, unsigned char **out, size_t *len,
 int sio_is_glb(const unsigned char *bytes, size_t len)
 {
 	return len >= 4 && memcmp(bytes, "glTF", 4) == 0;
+}
+
+int sio_is_lfs_pointer(const unsigned char *bytes, size_t len)
+{
+	static const char sig[] = "version https://git-lfs.github.com/spec/";
+	return len >= sizeof(sig) - 1 &&
+	       memcmp(bytes, sig, sizeof(sig) - 1) == 0;
+}
+
+/* 1 if the file at path is a Git LFS pointer. */
+static int lfs_pointer_file(const char *path)
+{
+	unsigned char head[64];
+	FILE *f = fopen(path, "rb");
+	if (!f)
+		return 0;
+	size_t n = fread(head, 1, sizeof(head), f);
+	fclose(f);
+	return sio_is_lfs_pointer(head, n);
 }
 
 /* ------------------------------------------------------------------ URIs */
@@ -203,6 +225,10 @@ static rad_status read_relative(packer *pk, int kind, size_t idx,
 		return rad_fail(pk->err, RAD_ERR_INVALID,
 		                "%s %zu: '%.80s' is not a regular file", what,
 		                idx, rel);
+	if (need && lfs_pointer_file(real))
+		return rad_fail(pk->err, RAD_ERR_INVALID,
+		                "buffer %zu: '%.80s' is " SIO_LFS_HINT, idx,
+		                rel);
 	if (need && (uint64_t)sb.st_size < need)
 		return rad_fail(
 		        pk->err, RAD_ERR_INVALID,
@@ -474,6 +500,10 @@ static rad_status pack_images(packer *pk, json_t *root)
 			return st;
 		json_object_set_new(im, "bufferView", json_integer(view));
 		json_object_set_new(im, "mimeType", json_string(type));
+		/* Messages about the image name it: by its file when unnamed.
+		 */
+		if (!json_string_value(json_object_get(im, "name")))
+			json_object_set_new(im, "name", json_string(uri));
 		json_object_del(im, "uri");
 	}
 	return RAD_OK;
@@ -620,6 +650,11 @@ rad_status sio_scene_read(const char *path, unsigned char **out, size_t *len,
 	if (info)
 		memset(info, 0, sizeof(*info));
 	rad_status st = sio_file_read(path, &bytes, &n, err);
+	if (!st && sio_is_lfs_pointer(bytes, n)) {
+		free(bytes);
+		return rad_fail(err, RAD_ERR_INVALID,
+		                "%s: the scene file is " SIO_LFS_HINT, path);
+	}
 	if (st || sio_is_glb(bytes, n)) {
 		*out = st ? NULL : bytes;
 		*len = st ? 0 : n;

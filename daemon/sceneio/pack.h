@@ -47,6 +47,17 @@ rad_status sio_file_read(const char *path, unsigned char **out, size_t *len,
 int sio_is_glb(const unsigned char *bytes, size_t len);
 
 /*
+ * 1 if bytes are a Git LFS pointer (they start "version
+ * https://git-lfs.github.com/spec/"): the small text file a repository
+ * cloned without git-lfs holds in place of a .glb, .bin or image.
+ */
+int sio_is_lfs_pointer(const unsigned char *bytes, size_t len);
+
+/* What to do about one, for messages that found a pointer. */
+#define SIO_LFS_HINT                                                           \
+	"a Git LFS pointer, not the file's content: run git lfs pull"
+
+/*
  * A scene file as one set of bytes: a GLB as it is, a .gltf packed with
  * the files beside it (sio_pack, dir = the file's folder).  *out is
  * malloc'ed.  info may be NULL.

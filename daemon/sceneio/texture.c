@@ -48,6 +48,7 @@
 #include <png.h>
 
 #include "internal.h"
+#include "pack.h"
 
 #define MAX_ROWS 256                 /* per triangle, see DESIGN */
 #define MAX_KEEP (1u << 22)          /* texels kept at level 0 */
@@ -208,7 +209,10 @@ static int decode(const unsigned char *b, size_t len, raw *r, char *why,
 		return decode_png(b, len, r, why, n);
 	if (len >= 3 && b[0] == 0xff && b[1] == 0xd8 && b[2] == 0xff)
 		return decode_jpeg(b, len, r, why, n);
-	snprintf(why, n, "neither PNG nor JPEG");
+	if (sio_is_lfs_pointer(b, len))
+		snprintf(why, n, "%s", SIO_LFS_HINT);
+	else
+		snprintf(why, n, "neither PNG nor JPEG");
 	return DEC_BAD;
 }
 

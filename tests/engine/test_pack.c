@@ -9,7 +9,9 @@
  * message naming the buffer: "..", an absolute path, a percent-encoded
  * "..", a scheme, a symbolic link out of the folder, a missing file, a
  * file shorter than byteLength.  Images are packed, PNG and JPEG only;
- * one left unpacked is reported in our words.
+ * one left unpacked is reported in our words.  A Git LFS pointer (what a
+ * clone without git-lfs holds) in place of a buffer, an image or the
+ * scene file itself is named as one.
  */
 #include <setjmp.h>
 #include <stdarg.h>
@@ -43,6 +45,13 @@ static const char doc_fmt[] =
         "\"count\":3,\"type\":\"VEC3\",\"min\":[0,0,0],\"max\":[1,1,0]}],"
         "\"bufferViews\":[{\"buffer\":0,\"byteLength\":36}],"
         "\"buffers\":[{\"uri\":\"%s\",\"byteLength\":%d}]%s}";
+
+/* A Git LFS pointer file, as a clone without git-lfs has it. */
+static const char lfs[] =
+        "version https://git-lfs.github.com/spec/v1\n"
+        "oid sha256:"
+        "3e56584aaa453e1c72226646de4af1f777d69f01d497d7a26cf806c8005ea322\n"
+        "size 108\n";
 
 typedef struct scratch {
 	char dir[64];   /* the scene's folder */
@@ -81,6 +90,12 @@ static int setup(void **state)
 	put(p, "\x89PNG not decoded", 16);
 	snprintf(p, sizeof(p), "%s/img.gif", s->dir);
 	put(p, "GIF89a", 6);
+	snprintf(p, sizeof(p), "%s/lfs.bin", s->dir);
+	put(p, lfs, strlen(lfs));
+	snprintf(p, sizeof(p), "%s/lfs.png", s->dir);
+	put(p, lfs, strlen(lfs));
+	snprintf(p, sizeof(p), "%s/lfs.glb", s->dir);
+	put(p, lfs, strlen(lfs));
 	*state = s;
 	return 0;
 }
@@ -202,9 +217,11 @@ static void test_images_are_packed_png_and_jpeg_only(void **state)
 	assert_true(sio_is_glb(glb, n));
 	assert_int_equal(info.buffers_read, 1);
 	assert_int_equal(info.images_read, 1);
-	/* The JSON chunk names the image's bufferView and type, no uri. */
+	/* The JSON chunk names the image's bufferView and type, no uri; the
+	 * unnamed image is named by its file, for messages. */
 	assert_non_null(memmem(glb, n, "\"mimeType\":\"image/png\"", 22));
-	assert_null(memmem(glb, n, "img.png", 7));
+	assert_null(memmem(glb, n, "\"uri\"", 5));
+	assert_non_null(memmem(glb, n, "\"name\":\"img.png\"", 16));
 	free(glb);
 
 	rad_scene *sc;
@@ -212,6 +229,45 @@ static void test_images_are_packed_png_and_jpeg_only(void **state)
 	                      ",\"images\":[{\"uri\":\"img.gif\"}]", &sc, &err),
 	                 RAD_ERR_UNSUPPORTED);
 	assert_non_null(strstr(err.msg, "image 0"));
+}
+
+/* Git LFS pointers are named, whether longer or shorter than the buffer's
+ * byteLength (a shorter one used to read as index garbage); an image that
+ * is one is skipped with a warning that says so; a scene file that is one
+ * is refused. */
+static void test_git_lfs_pointers_are_named(void **state)
+{
+	scratch *s = *state;
+	expect_refused(s, "lfs.bin", RAD_ERR_INVALID, "Git LFS pointer");
+	rad_scene *sc;
+	rad_error err = {0};
+	assert_int_equal(load(s, "lfs.bin", 756, "", &sc, &err),
+	                 RAD_ERR_INVALID);
+	assert_non_null(strstr(err.msg, "'lfs.bin' is a Git LFS pointer"));
+
+	char doc[4096];
+	snprintf(doc, sizeof(doc), doc_fmt, "tri.bin", 36,
+	         ",\"images\":[{\"uri\":\"lfs.png\"}],"
+	         "\"textures\":[{\"source\":0}]");
+	/* The material uses the texture: put it in after the factor. */
+	char *m = strstr(doc, "\"baseColorFactor\"");
+	assert_non_null(m);
+	char with[4096];
+	snprintf(with, sizeof(with),
+	         "%.*s\"baseColorTexture\":{\"index\":0},%s", (int)(m - doc),
+	         doc, m);
+	put(s->path, with, strlen(with));
+	sio_info info;
+	sc = NULL;
+	assert_int_equal(sio_load_file(s->path, &sc, &info, &err), RAD_OK);
+	if (!strstr(info.warnings, "'lfs.png' not read (a Git LFS pointer"))
+		fail_msg("warnings \"%s\"", info.warnings);
+	rad_scene_free(sc);
+
+	char glb[200];
+	snprintf(glb, sizeof(glb), "%s/lfs.glb", s->dir);
+	assert_int_equal(sio_load_file(glb, &sc, NULL, &err), RAD_ERR_INVALID);
+	assert_non_null(strstr(err.msg, "the scene file is a Git LFS pointer"));
 }
 
 /* Edge documents: an empty buffer packs (nothing read), a top level that
@@ -271,6 +327,8 @@ int main(void)
 	        cmocka_unit_test_setup_teardown(
 	                test_images_are_packed_png_and_jpeg_only, setup,
 	                teardown),
+	        cmocka_unit_test_setup_teardown(test_git_lfs_pointers_are_named,
+	                                        setup, teardown),
 	        cmocka_unit_test_setup_teardown(test_edge_documents, setup,
 	                                        teardown),
 	        cmocka_unit_test(test_unpacked_image_is_reported_plainly),
