@@ -174,8 +174,10 @@ typedef struct sio_doc {
 	const sio_doc_light *lights;
 	const sio_doc_scene *scenes;
 	const sio_str *required; /* extensionsRequired */
+	const sio_str *used;     /* extensionsUsed */
 	size_t nnodes, nmeshes, naccessors, nviews, nbuffers, nmaterials,
-	        ntextures, nsamplers, nimages, nlights, nscenes, nrequired;
+	        ntextures, nsamplers, nimages, nlights, nscenes, nrequired,
+	        nused;
 	int default_scene;         /* -1: none given */
 	struct sio_doc_owner *own; /* tinygltf's model behind the pointers */
 } sio_doc;

@@ -414,7 +414,8 @@ void view(sio_doc_owner &o)
 	             span(m.images.size() * sizeof(sio_doc_image)) +
 	             span(m.lights.size() * sizeof(sio_doc_light)) +
 	             span(m.scenes.size() * sizeof(sio_doc_scene)) +
-	             span(m.extensionsRequired.size() * sizeof(sio_str));
+	             span(m.extensionsRequired.size() * sizeof(sio_str)) +
+	             span(m.extensionsUsed.size() * sizeof(sio_str));
 	if (len) {
 		o.arrays = map_pages(len);
 		o.arrays_len = len;
@@ -476,6 +477,7 @@ void view(sio_doc_owner &o)
 	        });
 	d.required =
 	        mirror<sio_str>(&p, m.extensionsRequired, &d.nrequired, str);
+	d.used = mirror<sio_str>(&p, m.extensionsUsed, &d.nused, str);
 	d.default_scene = m.defaultScene;
 	d.own = &o;
 }

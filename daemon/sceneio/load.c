@@ -45,6 +45,44 @@ static rad_status check_required(const sio_doc *d, rad_error *err)
 	return RAD_OK;
 }
 
+/* Extensions a document may use that change what is read. */
+static int understood(sio_str ext)
+{
+	static const char *const known[] = {
+	        SIO_LIGHTS_EXT, SIO_STRENGTH_EXT, SIO_TRANSFORM_EXT,
+	        /* change nothing a diffuse solver reads: */
+	        "KHR_materials_specular", "KHR_materials_ior",
+	        "KHR_materials_clearcoat", "KHR_materials_sheen",
+	        "KHR_materials_unlit", "KHR_mesh_quantization"};
+	for (size_t k = 0; k < sizeof known / sizeof known[0]; k++)
+		if (sio_str_is(ext, known[k]))
+			return 1;
+	return 0;
+}
+
+/* Say which extensions the document uses that the import does not read
+ * (transmission, volume...): their surfaces are taken as opaque and
+ * diffuse, which the user should know. */
+static void note_unread(const sio_doc *d, sio_info *info)
+{
+	char list[256] = "";
+	size_t n = 0;
+	for (size_t k = 0; k < d->nused && n + 1 < sizeof list; k++) {
+		if (understood(d->used[k]))
+			continue;
+		int w = snprintf(list + n, sizeof list - n, "%s%.60s",
+		                 n ? ", " : "", d->used[k].s);
+		if (w < 0)
+			break;
+		n += (size_t)w;
+	}
+	if (list[0])
+		sio_note(info,
+		         "extensions used but not read (their surfaces are "
+		         "taken as opaque diffuse reflectors): %s",
+		         list);
+}
+
 /* The info counters that depend on the document alone. */
 static void count_document(const sio_doc *d, sio_info *info)
 {
@@ -99,6 +137,13 @@ static rad_status build(const sio_doc *d, rad_scene *s, sio_sensor_set *ss,
 		sio_tex_cache_free(&im.tex); /* before the BVH is built */
 		if (st == RAD_OK)
 			st = rad_scene_commit(s, err);
+		rad_scene_counts c;
+		rad_scene_counts_get(s, &c);
+		if (st == RAD_OK && c.lights == 0 && c.emitters == 0)
+			sio_note(info,
+			         "the scene has no light (no emissive "
+			         "material, no KHR_lights_punctual light): "
+			         "every illuminance is 0");
 		sio_import_done(&im);
 	}
 	if (st == RAD_OK && p.sensor_st != RAD_OK) {
@@ -126,6 +171,7 @@ static rad_status load(const unsigned char *b, size_t len, rad_scene **scene,
 		return st;
 	}
 	count_document(d, info);
+	note_unread(d, info);
 	if (ss)
 		ss->d = d;
 	rad_scene *s = NULL;

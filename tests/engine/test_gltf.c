@@ -364,6 +364,32 @@ static void test_double_sided_adds_back_faces(void **state)
 	free(doc);
 }
 
+/* What the import cannot honour is said: no light, glass. */
+static void test_unlit_and_unread_are_noted(void **state)
+{
+	(void)state;
+	char *doc = subst(quad_doc(), "\"emissiveFactor\":[1,0.5,0.25]",
+	                  "\"emissiveFactor\":[0,0,0]");
+	doc = subst(doc, "\"asset\":",
+	            "\"extensionsUsed\":[\"KHR_materials_transmission\","
+	            "\"KHR_texture_transform\"],\"asset\":");
+	sio_info info;
+	rad_scene *s = load_ok(doc, strlen(doc), &info);
+	assert_non_null(strstr(info.warnings, "has no light"));
+	assert_non_null(strstr(info.warnings, "not read (their surfaces are "
+	                                      "taken as opaque diffuse "
+	                                      "reflectors): "
+	                                      "KHR_materials_transmission"));
+	assert_null(strstr(info.warnings, "KHR_texture_transform"));
+	rad_scene_free(s);
+	free(doc);
+	doc = quad_doc(); /* emissive: lit, and nothing to say */
+	s = load_ok(doc, strlen(doc), &info);
+	assert_null(strstr(info.warnings, "no light"));
+	rad_scene_free(s);
+	free(doc);
+}
+
 static void test_textures_read_or_explained(void **state)
 {
 	(void)state;
@@ -945,6 +971,7 @@ int main(void)
 	        cmocka_unit_test(test_mirroring_keeps_the_front_side),
 	        cmocka_unit_test(test_materials_default_clamp_and_counters),
 	        cmocka_unit_test(test_textures_read_or_explained),
+	        cmocka_unit_test(test_unlit_and_unread_are_noted),
 	        cmocka_unit_test(test_double_sided_adds_back_faces),
 	        cmocka_unit_test(test_nan_and_degenerate_triangles_are_counted),
 	        cmocka_unit_test(test_punctual_lights_are_placed_and_aimed),
