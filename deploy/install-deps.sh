@@ -18,7 +18,9 @@ set -euo pipefail
 # (mbpoll, pymodbus) for end-to-end tests; gnuplot for the study plots;
 # python3 validates JSON in the CLI test, with numpy and Pillow reads
 # textures independently in test_textures; Node.js + npm run the Khronos
-# glTF validator.
+# glTF validator; Blender (with its bundled glTF exporter) makes the
+# scenes test_blender and tests/bench/textured_interior.sh export at run
+# time.
 # python3-serial-asyncio is only a Recommends of python3-pymodbus, but
 # `import pymodbus.client` fails without it, so it is listed explicitly.
 PACKAGES=(
@@ -27,7 +29,7 @@ PACKAGES=(
 	libjansson-dev libsqlite3-dev libpng-dev libjpeg62-turbo-dev
 	mbpoll gnuplot-nox python3 python3-pymodbus python3-serial-asyncio
 	python3-numpy python3-pil
-	nodejs npm chromium
+	nodejs npm chromium blender
 )
 
 log() { printf 'install-deps: %s\n' "$*" >&2; }
