@@ -383,37 +383,50 @@ static uint32_t wrap_row(int64_t j, uint32_t h, int wrap)
 	return (uint32_t)(m < 0 ? m + h : m);
 }
 
-/* Prefix of row p at r in [0, w] (linear within a texel), channel c. */
-static double prefix_at(const float *p, uint32_t w, double r, int c)
+/* Prefix of row p at r in [0, w] (linear within a texel), RGB. */
+static void prefix_at(const float *p, uint32_t w, double r, double out[3])
 {
 	r = r < 0 ? 0 : r > w ? w : r;
 	uint32_t i = r >= w ? w - 1 : (uint32_t)r;
-	return p[3 * i + c] + (r - i) * (p[3 * (i + 1) + c] - p[3 * i + c]);
+	const float *a = p + 3 * i;
+	double t = r - i;
+	for (int c = 0; c < 3; c++)
+		out[c] = a[c] + t * (a[3 + c] - a[c]);
 }
 
-/* Integral from 0 to x of row p (w texels) wrapped as wrap, channel c. */
-static double row_integral(const float *p, uint32_t w, int wrap, double x,
-                           int c)
+/* Integral from 0 to x of row p (w texels) wrapped as wrap, RGB. */
+static void row_integral(const float *p, uint32_t w, int wrap, double x,
+                         double out[3])
 {
-	double total = p[3 * w + c];
+	const float *total = p + 3 * w;
 	if (wrap == SIO_GL_CLAMP_TO_EDGE) {
-		if (x <= 0)
-			return x * (p[3 + c] - p[c]);
-		if (x >= w)
-			return total +
-			       (x - w) * (p[3 * w + c] - p[3 * (w - 1) + c]);
-		return prefix_at(p, w, x, c);
+		if (x <= 0) {
+			for (int c = 0; c < 3; c++)
+				out[c] = x * (p[3 + c] - p[c]);
+		} else if (x >= w) {
+			for (int c = 0; c < 3; c++)
+				out[c] = total[c] +
+				         (x - w) * (total[c] - total[c - 3]);
+		} else {
+			prefix_at(p, w, x, out);
+		}
+		return;
 	}
+	double in[3];
 	if (wrap == SIO_GL_MIRRORED_REPEAT) {
 		/* Over [w, 2w] the row runs backwards: the integral to r is
 		 * total + (total - P(2w - r)). */
 		double k = floor(x / (2.0 * w)), r = x - k * 2.0 * w;
-		return 2 * k * total +
-		       (r <= w ? prefix_at(p, w, r, c)
-		               : 2 * total - prefix_at(p, w, 2.0 * w - r, c));
+		prefix_at(p, w, r <= w ? r : 2.0 * w - r, in);
+		for (int c = 0; c < 3; c++)
+			out[c] = 2 * k * total[c] +
+			         (r <= w ? in[c] : 2 * total[c] - in[c]);
+		return;
 	}
 	double k = floor(x / w);
-	return k * total + prefix_at(p, w, x - k * w, c);
+	prefix_at(p, w, x - k * w, in);
+	for (int c = 0; c < 3; c++)
+		out[c] = k * total[c] + in[c];
 }
 
 /* The triangle's chord at height y: [*xl, *xr]. */
@@ -466,14 +479,12 @@ static int integrate(const level *lv, const int wrap[2], const double p[3][2],
 				chord(p, 0.5 * (a + b) + q * g * h, &xl, &xr);
 				if (!(xr > xl))
 					continue;
+				double fr[3], fl[3];
+				row_integral(row, lv->w, wrap[0], xr, fr);
+				row_integral(row, lv->w, wrap[0], xl, fl);
 				area += 0.5 * h * (xr - xl);
 				for (int c = 0; c < 3; c++)
-					sum[c] +=
-					        0.5 * h *
-					        (row_integral(row, lv->w,
-					                      wrap[0], xr, c) -
-					         row_integral(row, lv->w,
-					                      wrap[0], xl, c));
+					sum[c] += 0.5 * h * (fr[c] - fl[c]);
 			}
 		}
 	}
@@ -491,10 +502,11 @@ static void texel(const level *lv, const int wrap[2], double x, double y,
 	const float *row =
 	        lv->pre + (size_t)wrap_row((int64_t)floor(y), lv->h, wrap[1]) *
 	                          (lv->w + 1) * 3;
-	double x0 = floor(x);
+	double x0 = floor(x), f1[3], f0[3];
+	row_integral(row, lv->w, wrap[0], x0 + 1, f1);
+	row_integral(row, lv->w, wrap[0], x0, f0);
 	for (int c = 0; c < 3; c++)
-		rgb[c] = row_integral(row, lv->w, wrap[0], x0 + 1, c) -
-		         row_integral(row, lv->w, wrap[0], x0, c);
+		rgb[c] = f1[c] - f0[c];
 }
 
 void sio_tex_mean(const sio_texture *t, const int wrap[2],
