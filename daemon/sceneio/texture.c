@@ -51,7 +51,7 @@
 #include "pack.h"
 
 #define MAX_ROWS 256                 /* per triangle, see DESIGN */
-#define MAX_KEEP (1u << 22)          /* texels kept at level 0 */
+#define MAX_KEEP (1u << 21)          /* texels kept at level 0 */
 #define MAX_DECODE ((size_t)1 << 26) /* texels decoded at most */
 #define MAX_SIDE 65535u              /* pixels per side */
 #define BUDGET ((size_t)512 << 20)   /* bytes of kept images */
