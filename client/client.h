@@ -88,7 +88,10 @@ enum {
 	X(FLOOR, "floor", 1, "NODE",                                           \
 	  "report: the node whose extent is the room's [floor]")               \
 	X(SURFACE, "surface", 1, "NODE",                                       \
-	  "report: a node to grid (repeatable) [every node]")
+	  "report: a node to grid (repeatable) [every node]")                  \
+	X(LUMINAIRE, "luminaire", 1, "NAME=FILE",                              \
+	  "submit: the light NAME shines as the IES or EULUMDAT FILE "         \
+	  "(repeatable)")
 
 typedef enum lx_opt {
 #define LX_OPT_ENUM_(id, name, arg, meta, help) LX_OPT_##id,
@@ -134,6 +137,8 @@ typedef struct lx_ctx {
 	int json;              /* --json */
 	const char **surfaces; /* every --surface, in order */
 	int nsurfaces;
+	const char **luminaires; /* every --luminaire, in order */
+	int nluminaires;
 	lx_conn conn;
 	int connected;
 } lx_ctx;

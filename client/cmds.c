@@ -101,9 +101,9 @@ int lx_job_options(lx_ctx *cx, json_t *req)
 
 /*
  * Read a scene file as it will travel: a GLB as it is, a .gltf packed
- * into one GLB with the buffers and images beside it (sio_scene_read: the
- * daemon reads no file).  Usage error (exit 2) when it cannot be read or
- * packed.
+ * into one GLB with the buffers and images beside it, and the --luminaire
+ * files in it (sio_scene_read_lum: the daemon reads no file).  Usage error
+ * (exit 2) when it cannot be read or packed.
  */
 static int read_scene(lx_ctx *cx, const char *path, unsigned char **out,
                       size_t *len)
@@ -118,9 +118,35 @@ static int read_scene(lx_ctx *cx, const char *path, unsigned char **out,
 		                      path, strerror(e));
 	if (st.st_size == 0)
 		return lx_usage_error(cx, "scene file '%s' is empty", path);
-	if (sio_scene_read(path, out, len, NULL, &err) != RAD_OK)
-		return lx_usage_error(cx, "%s", err.msg);
-	return 0;
+	sio_luminaire *lum = calloc((size_t)cx->nluminaires + 1, sizeof *lum);
+	if (!lum)
+		return lx_usage_error(cx, "out of memory");
+	char **names = calloc((size_t)cx->nluminaires + 1, sizeof *names);
+	int rc = names ? 0 : lx_usage_error(cx, "out of memory");
+	for (int k = 0; !rc && k < cx->nluminaires; k++) {
+		const char *spec = cx->luminaires[k], *eq = strchr(spec, '=');
+		if (!eq || eq == spec || !eq[1]) {
+			rc = lx_usage_error(cx,
+			                    "--luminaire: invalid value '%s' "
+			                    "(expected NAME=FILE)",
+			                    spec);
+			break;
+		}
+		names[k] = strndup(spec, (size_t)(eq - spec));
+		if (!names[k]) {
+			rc = lx_usage_error(cx, "out of memory");
+			break;
+		}
+		lum[k] = (sio_luminaire){names[k], eq + 1};
+	}
+	if (!rc && sio_scene_read_lum(path, lum, (size_t)cx->nluminaires, out,
+	                              len, NULL, &err) != RAD_OK)
+		rc = lx_usage_error(cx, "%s", err.msg);
+	for (int k = 0; names && k < cx->nluminaires; k++)
+		free(names[k]);
+	free(names);
+	free(lum);
+	return rc;
 }
 
 /* The scene's default name: the file name without directory and suffix. */
@@ -193,7 +219,8 @@ int lx_cmd_submit(lx_ctx *cx)
 {
 	const uint64_t create_only =
 	        ~(LX_BIT(HELP) | LX_BIT(JSON) | LX_BIT(CONNECT) |
-	          LX_BIT(TOKEN_FILE) | LX_BIT(NAME) | LX_BIT(SOLVE));
+	          LX_BIT(TOKEN_FILE) | LX_BIT(NAME) | LX_BIT(SOLVE) |
+	          LX_BIT(LUMINAIRE));
 	char name[256];
 	unsigned char *data = NULL;
 	size_t len = 0;

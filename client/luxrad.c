@@ -33,14 +33,22 @@ typedef struct cmd_def {
 } cmd_def;
 
 static const cmd_def commands[] = {
-        {"submit", lx_cmd_submit, 1, CREATE_OPTS | LX_BIT(SOLVE),
-         "FILE [--name N] [--solve [create options]]",
+        {"submit", lx_cmd_submit, 1,
+         CREATE_OPTS | LX_BIT(SOLVE) | LX_BIT(LUMINAIRE),
+         "FILE [--name N] [--luminaire NAME=FILE]... [--solve [create "
+         "options]]",
          "upload a .gltf/.glb scene; prints the scene id",
-         "With --solve, also creates a job (create options apply) and runs "
-         "it to\nconvergence in the background; prints the job id instead. "
-         "--json prints\neach reply (upload, create, run) as one JSON "
+         "A .gltf is packed with the files beside it (buffers, images, the\n"
+         "photometric files its nodes name) into one GLB.  --luminaire "
+         "gives the\nlight NAME (its node's or its own glTF name) the IES "
+         "or EULUMDAT FILE;\nthe file travels with the scene.  With "
+         "--solve, also creates a job\n(create options apply) and runs it "
+         "to convergence in the background;\nprints the job id instead. "
+         "--json prints each reply (upload, create,\nrun) as one JSON "
          "line.\n\nExamples:\n  luxrad submit scenes/cornell.gltf\n"
-         "  luxrad submit office.glb --name office --solve --eps 1e-3\n"},
+         "  luxrad submit office.glb --name office --solve --eps 1e-3\n"
+         "  luxrad submit office.gltf --luminaire lamp=downlight.ies "
+         "--solve\n"},
         {"scenes", lx_cmd_scenes, 0, 0, "", "list scenes",
          "Examples:\n  luxrad scenes\n  luxrad scenes --json\n"},
         {"jobs", lx_cmd_jobs, 0, 0, "", "list jobs",
@@ -292,6 +300,8 @@ static int parse_option(lx_ctx *cx, int argc, char **argv, int *i,
 	cx->given[o]++;
 	if (o == LX_OPT_SURFACE)
 		cx->surfaces[cx->nsurfaces++] = value;
+	if (o == LX_OPT_LUMINAIRE)
+		cx->luminaires[cx->nluminaires++] = value;
 	return 0;
 }
 
@@ -387,9 +397,11 @@ int main(int argc, char **argv)
 	memset(&cx, 0, sizeof cx);
 	cx.pos = calloc((size_t)argc + 1, sizeof *cx.pos);
 	cx.surfaces = calloc((size_t)argc + 1, sizeof *cx.surfaces);
-	if (!cx.pos || !cx.surfaces) {
+	cx.luminaires = calloc((size_t)argc + 1, sizeof *cx.luminaires);
+	if (!cx.pos || !cx.surfaces || !cx.luminaires) {
 		free(cx.pos);
 		free(cx.surfaces);
+		free(cx.luminaires);
 		fprintf(stderr, "luxrad: out of memory\n");
 		return LX_EXIT_USAGE;
 	}
@@ -397,6 +409,7 @@ int main(int argc, char **argv)
 	lx_close(&cx);
 	free(cx.pos);
 	free(cx.surfaces);
+	free(cx.luminaires);
 	if (fflush(stdout) != 0 && rc == LX_EXIT_OK) {
 		fprintf(stderr, "luxrad: cannot write to stdout\n");
 		rc = LX_EXIT_DAEMON;

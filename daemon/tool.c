@@ -9,7 +9,6 @@
 #include <string.h>
 
 #include "engine_json.h"
-#include "photometry.h"
 #include "rp.h"
 
 /* ------------------------------------------------------------ luminaires */
@@ -31,106 +30,40 @@ int tool_luminaire_arg(tool_luminaires *l, const char *spec, char *msg,
 	return 0;
 }
 
-/* The luminaires' tables, and which lights took them. */
-typedef struct attach {
-	const tool_luminaires *lum;
-	pho_table *table[TOOL_MAX_LUMINAIRES];
-	int used[TOOL_MAX_LUMINAIRES];
-} attach;
-
-static int name_is(const char *spec, const char *name)
-{
-	size_t n = (size_t)(strchr(spec, '=') - spec);
-	return name && strlen(name) == n && memcmp(spec, name, n) == 0;
-}
-
-/* sio_light_hook: the table of the --luminaire naming this light. */
-static rad_status attach_light(void *ud, const char *node, rad_light_desc *d,
-                               rad_error *err)
-{
-	attach *a = ud;
-	for (int k = 0; k < a->lum->n; k++) {
-		const char *spec = a->lum->spec[k];
-		if (!name_is(spec, node) && !name_is(spec, d->name))
-			continue;
-		if (d->kind != RAD_LIGHT_POINT)
-			return rad_fail(err, RAD_ERR_INVALID,
-			                "--luminaire %s: light '%s' is not a "
-			                "point light",
-			                spec, d->name ? d->name : node);
-		a->used[k] = 1;
-		return pho_light_set(a->table[k], d, err);
-	}
-	return RAD_OK;
-}
-
-/* Read and parse every luminaire file into a. */
-static int read_luminaires(const char *prog, attach *a)
-{
-	for (int k = 0; k < a->lum->n; k++) {
-		const char *file = strchr(a->lum->spec[k], '=') + 1;
-		unsigned char *bytes = NULL;
-		size_t len = 0;
-		char msg[512];
-		rad_error err;
-		if (sio_file_read(file, &bytes, &len, &err) != RAD_OK) {
-			fprintf(stderr, "%s: --luminaire: %s\n", prog, err.msg);
-			return TOOL_FAIL;
-		}
-		pho_status st = pho_parse((const char *)bytes, len, NULL,
-		                          &a->table[k], msg, sizeof msg);
-		free(bytes);
-		if (st != PHO_OK) {
-			fprintf(stderr, "%s: %s: %s: %s\n", prog, file,
-			        pho_status_name(st), msg);
-			return TOOL_FAIL;
-		}
-	}
-	return TOOL_OK;
-}
-
 /* -------------------------------------------------------------- scenes */
 
 int tool_scene_load(const char *prog, const char *path,
                     const tool_luminaires *lum, rad_scene **sc, sio_info *info,
                     double *seconds)
 {
-	static const tool_luminaires none = {.n = 0};
-	attach a = {.lum = lum ? lum : &none};
+	sio_luminaire named[TOOL_MAX_LUMINAIRES];
+	char light[TOOL_MAX_LUMINAIRES][256];
+	int n = lum ? lum->n : 0;
+	for (int k = 0; k < n; k++) { /* NAME=FILE, checked when parsed */
+		const char *spec = lum->spec[k], *eq = strchr(spec, '=');
+		snprintf(light[k], sizeof light[k], "%.*s", (int)(eq - spec),
+		         spec);
+		named[k] = (sio_luminaire){light[k], eq + 1};
+	}
 	unsigned char *bytes = NULL;
 	size_t len = 0;
 	rad_error err = {0};
-	int rc = read_luminaires(prog, &a);
-	rad_status st = RAD_OK;
-	if (rc == TOOL_OK &&
-	    (st = sio_scene_read(path, &bytes, &len, NULL, &err)) != RAD_OK) {
+	*seconds = 0;
+	if (sio_scene_read_lum(path, named, (size_t)n, &bytes, &len, NULL,
+	                       &err) != RAD_OK) {
 		fprintf(stderr, "%s: %s\n", prog, err.msg);
-		rc = TOOL_FAIL;
+		return TOOL_FAIL;
 	}
 	double t0 = rad_seconds();
-	if (rc == TOOL_OK)
-		st = sio_load_hooked(bytes, len, attach_light, &a, sc, info,
-		                     &err);
+	rad_status st = sio_load(bytes, len, sc, info, NULL, NULL, &err);
 	*seconds = rad_seconds() - t0;
 	free(bytes);
-	if (rc == TOOL_OK && st != RAD_OK) {
+	if (st != RAD_OK) {
 		fprintf(stderr, "%s: %s: %s: %s\n", prog, path,
 		        rad_status_name(err.code), err.msg);
-		rc = TOOL_FAIL;
+		return TOOL_FAIL;
 	}
-	for (int k = 0; rc == TOOL_OK && k < a.lum->n; k++)
-		if (!a.used[k]) {
-			fprintf(stderr,
-			        "%s: --luminaire %s: %s has no light of that "
-			        "name\n",
-			        prog, a.lum->spec[k], path);
-			rad_scene_free(*sc);
-			*sc = NULL;
-			rc = TOOL_FAIL;
-		}
-	for (int k = 0; k < a.lum->n; k++)
-		pho_free(a.table[k]);
-	return rc;
+	return TOOL_OK;
 }
 
 int tool_points_load(const char *prog, const char *path, double **xyz,

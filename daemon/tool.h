@@ -22,7 +22,8 @@ enum { TOOL_OK = 0, TOOL_FAIL = 1, TOOL_USAGE = 2 };
  * glTF intensity; the glTF colour is kept, scaled so its largest channel
  * is 1 (white when the light is black).  The luminaire's nadir (gamma
  * 0) is the light's direction, local -Z, and its C = 0 plane holds the
- * node's local +X.  Every NAME must match a light.
+ * node's local +X.  Every NAME must match a light.  The file is packed
+ * with the scene (sio_scene_read_lum), as luxrad submit does.
  */
 #define TOOL_MAX_LUMINAIRES 64
 

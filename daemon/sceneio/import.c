@@ -389,12 +389,7 @@ static rad_status add_light(sio_import *im, int ni, int li, const sio_mat4 *w)
 	char label[192];
 	snprintf(label, sizeof label, "node %d '%s'", ni,
 	         sio_node_name(im->d, ni));
-	const char *node =
-	        im->d->nodes[ni].name.len ? im->d->nodes[ni].name.s : "";
 	st = node_photometry(im, ni, &d, &table);
-	if (st == RAD_OK && im->hook &&
-	    (st = im->hook(im->hook_ud, node, &d, im->err)))
-		st = sio_blame(im->err, st, label);
 	if (st == RAD_OK)
 		st = sio_blame(im->err, rad_scene_add_light(im->s, &d, im->err),
 		               label);

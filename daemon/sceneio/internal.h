@@ -159,8 +159,6 @@ typedef struct sio_import {
 	double *rho;             /* their reflectances, when textured */
 	size_t nbatch;           /* doubles in batch (9 per triangle) */
 	uint64_t triangles;      /* offered so far (the engine counts 32-bit) */
-	sio_light_hook hook;     /* may be NULL */
-	void *hook_ud;
 } sio_import;
 
 /* material.c: the engine id of glTF material mi (-1: glTF's default),

@@ -119,7 +119,7 @@ static rad_status visit(void *ud, int ni, const sio_mat4 *w)
 
 /* Walk d into s (may be NULL) and ss (may be NULL), then commit s. */
 static rad_status build(const sio_doc *d, rad_scene *s, sio_sensor_set *ss,
-                        const sio_import *hooks, sio_info *info, rad_error *err)
+                        sio_info *info, rad_error *err)
 {
 	sio_import im;
 	rad_error deferred = {0};
@@ -127,10 +127,6 @@ static rad_status build(const sio_doc *d, rad_scene *s, sio_sensor_set *ss,
 	rad_status st = RAD_OK;
 	if (s)
 		st = sio_import_init(&im, d, s, info, err);
-	if (s && hooks) {
-		im.hook = hooks->hook;
-		im.hook_ud = hooks->hook_ud;
-	}
 	if (st == RAD_OK)
 		st = sio_walk(d, visit, &p, err);
 	if (s) {
@@ -156,8 +152,7 @@ static rad_status build(const sio_doc *d, rad_scene *s, sio_sensor_set *ss,
 
 /* Parse and build; *scene (when asked for) is set only on success. */
 static rad_status load(const unsigned char *b, size_t len, rad_scene **scene,
-                       sio_info *info, sio_sensor_set *ss,
-                       const sio_import *hooks, rad_error *err)
+                       sio_info *info, sio_sensor_set *ss, rad_error *err)
 {
 	int glb;
 	sio_doc *d = NULL;
@@ -178,7 +173,7 @@ static rad_status load(const unsigned char *b, size_t len, rad_scene **scene,
 	if (scene)
 		st = rad_scene_new(&s, err);
 	if (st == RAD_OK)
-		st = build(d, s, ss, hooks, info, err);
+		st = build(d, s, ss, info, err);
 	sio_doc_free(d);
 	if (st != RAD_OK) {
 		rad_scene_free(s);
@@ -189,11 +184,9 @@ static rad_status load(const unsigned char *b, size_t len, rad_scene **scene,
 	return RAD_OK;
 }
 
-/* sio_load, with the light hook in hooks (may be NULL). */
-static rad_status load_with(const void *bytes, size_t len, rad_scene **scene,
-                            sio_info *info, sio_sensor **sensors,
-                            size_t *nsensors, const sio_import *hooks,
-                            rad_error *err)
+rad_status sio_load(const void *bytes, size_t len, rad_scene **scene,
+                    sio_info *info, sio_sensor **sensors, size_t *nsensors,
+                    rad_error *err)
 {
 	rad_error_clear(err);
 	if (info)
@@ -216,29 +209,11 @@ static rad_status load_with(const void *bytes, size_t len, rad_scene **scene,
 		                len);
 	sio_sensor_set ss = {0};
 	rad_status st =
-	        load(bytes, len, scene, info, sensors ? &ss : NULL, hooks, err);
+	        load(bytes, len, scene, info, sensors ? &ss : NULL, err);
 	if (st == RAD_OK && sensors)
 		sio_sensor_set_take(&ss, sensors, nsensors);
 	sio_sensor_set_free(&ss);
 	return st;
-}
-
-rad_status sio_load(const void *bytes, size_t len, rad_scene **scene,
-                    sio_info *info, sio_sensor **sensors, size_t *nsensors,
-                    rad_error *err)
-{
-	return load_with(bytes, len, scene, info, sensors, nsensors, NULL, err);
-}
-
-rad_status sio_load_hooked(const void *bytes, size_t len, sio_light_hook hook,
-                           void *ud, rad_scene **scene, sio_info *info,
-                           rad_error *err)
-{
-	sio_import hooks = {.hook = hook, .hook_ud = ud};
-	if (!scene)
-		return rad_fail(err, RAD_ERR_INVALID,
-		                "sio_load_hooked: no out");
-	return load_with(bytes, len, scene, info, NULL, NULL, &hooks, err);
 }
 
 void sio_sensors_free(sio_sensor *s)

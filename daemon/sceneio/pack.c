@@ -30,80 +30,9 @@
 #include <strings.h>
 #include <sys/stat.h>
 
-#include "pack.h"
+#include "pack_int.h"
 
-#define ALIGN 8
-#define GLB_MAX 0xFFFFFFF0u    /* the GLB length field is 32 bits */
 #define IMAGE_MAX (1ull << 30) /* one image file, at most */
-#define GLB_JSON 0x4E4F534Au   /* "JSON" */
-#define GLB_BIN 0x004E4942u    /* "BIN\0" */
-
-/* ----------------------------------------------------------- file bytes */
-
-/* Read up to max bytes of an open stream (all of it when max is 0). */
-static rad_status read_stream(FILE *f, const char *path, size_t max,
-                              unsigned char **out, size_t *len, rad_error *err)
-{
-	/* By doubling chunks rather than by the file's size, so pipes and
-	 * special files work too. */
-	unsigned char *buf = NULL;
-	size_t n = 0, cap = 0;
-	for (;;) {
-		if (n == cap) {
-			size_t ncap = cap ? 2 * cap : (size_t)1 << 16;
-			unsigned char *nb = realloc(buf, ncap);
-			if (!nb) {
-				free(buf);
-				return rad_fail(err, RAD_ERR_NOMEM,
-				                "out of memory reading '%s'",
-				                path);
-			}
-			buf = nb;
-			cap = ncap;
-		}
-		size_t want = cap - n;
-		if (max && want > max - n)
-			want = max - n;
-		size_t got = want ? fread(buf + n, 1, want, f) : 0;
-		n += got;
-		if (got == 0 || (max && n == max))
-			break;
-	}
-	if (ferror(f)) {
-		free(buf);
-		return rad_fail(err, RAD_ERR_IO, "cannot read '%s': %s", path,
-		                strerror(errno));
-	}
-	*out = buf;
-	*len = n;
-	return RAD_OK;
-}
-
-rad_status sio_file_read(const char *path, unsigned char **out, size_t *len,
-                         rad_error *err)
-{
-	*out = NULL;
-	*len = 0;
-	FILE *f = fopen(path, "rb");
-	if (!f)
-		return rad_fail(err, RAD_ERR_IO, "cannot open '%s': %s", path,
-		                strerror(errno));
-	rad_status st = read_stream(f, path, 0, out, len, err);
-	fclose(f);
-	return st;
-}
-
-int sio_is_glb(const unsigned char *bytes, size_t len)
-{
-	return len >= 4 && memcmp(bytes, "glTF", 4) == 0;
-}
-
-int sio_is_lfs_pointer(const unsigned char *bytes, size_t len)
-{
-	static const char sig[] = "version https://git-lfs.github.com/spec/";
-	return len >= sizeof(sig) - 1 &&
-	       memcmp(bytes, sig, sizeof(sig) - 1) == 0;
-}
 
 /* 1 if the file at path is a Git LFS pointer. */
 static int lfs_pointer_file(const char *path)
@@ -118,15 +47,6 @@ static int lfs_pointer_file(const char *path)
 }
 
 /* ------------------------------------------------------------------ URIs */
-
-typedef struct packer {
-	const char *dir;
-	char realdir[PATH_MAX];
-	unsigned char *bin; /* the binary chunk being built */
-	size_t nbin, cap;
-	sio_pack_info info;
-	rad_error *err;
-} packer;
 
 static int hexval(int c)
 {
@@ -245,8 +165,8 @@ static rad_status read_relative(packer *pk, int kind, size_t idx,
 		                "%s %zu: cannot open "
 		                "'%.80s': %s",
 		                what, idx, rel, strerror(errno));
-	rad_status st =
-	        read_stream(f, rel, need ? need : IMAGE_MAX, out, len, pk->err);
+	rad_status st = sio_pack_read_stream(f, rel, need ? need : IMAGE_MAX,
+	                                     out, len, pk->err);
 	fclose(f);
 	if (!st && need && *len != need) {
 		free(*out);
@@ -341,35 +261,6 @@ static rad_status read_uri(packer *pk, int kind, size_t idx, const char *uri,
 
 /* ------------------------------------------------------- the binary chunk */
 
-/* Append bytes at the next multiple of ALIGN; *at gets their offset. */
-static rad_status bin_append(packer *pk, const unsigned char *b, size_t n,
-                             size_t *at)
-{
-	size_t start = (pk->nbin + ALIGN - 1) / ALIGN * ALIGN;
-	if (start + n > GLB_MAX)
-		return rad_fail(pk->err, RAD_ERR_LIMIT,
-		                "the packed scene would exceed 4 GiB, the GLB "
-		                "limit");
-	if (start + n > pk->cap) {
-		size_t ncap = pk->cap ? pk->cap : (size_t)1 << 16;
-		while (ncap < start + n)
-			ncap *= 2;
-		unsigned char *nb = realloc(pk->bin, ncap);
-		if (!nb)
-			return rad_fail(pk->err, RAD_ERR_NOMEM,
-			                "out of memory");
-		pk->bin = nb;
-		pk->cap = ncap;
-	}
-	if (start > pk->nbin)
-		memset(pk->bin + pk->nbin, 0, start - pk->nbin);
-	if (n)
-		memcpy(pk->bin + start, b, n);
-	pk->nbin = start + n;
-	*at = start;
-	return RAD_OK;
-}
-
 static json_int_t int_member(json_t *o, const char *key, json_int_t def)
 {
 	json_t *v = json_object_get(o, key);
@@ -390,6 +281,19 @@ static rad_status pack_buffers(packer *pk, json_t *buffers, size_t **base)
 		if (bl < 0)
 			return rad_fail(pk->err, RAD_ERR_INVALID,
 			                "buffer %zu has no byteLength", i);
+		if (!uri && i == 0 && pk->glb_bin) { /* the GLB's own chunk */
+			if ((size_t)bl > pk->nglb_bin)
+				return rad_fail(
+				        pk->err, RAD_ERR_INVALID,
+				        "buffer 0: byteLength %lld, the "
+				        "GLB's binary chunk %zu bytes",
+				        (long long)bl, pk->nglb_bin);
+			rad_status st = sio_pack_bin_append(
+			        pk, pk->glb_bin, (size_t)bl, &(*base)[0]);
+			if (st)
+				return st;
+			continue;
+		}
 		if (!uri)
 			return rad_fail(pk->err, RAD_ERR_INVALID,
 			                "buffer %zu has no uri (only a GLB's "
@@ -412,7 +316,8 @@ static rad_status pack_buffers(packer *pk, json_t *buffers, size_t **base)
 			        i, len, (long long)bl);
 		}
 		if (!st)
-			st = bin_append(pk, bytes, (size_t)bl, &(*base)[i]);
+			st = sio_pack_bin_append(pk, bytes, (size_t)bl,
+			                         &(*base)[i]);
 		free(bytes);
 		if (st)
 			return st;
@@ -450,28 +355,6 @@ static const char *mime_of(const char *uri, const char *mime)
 	return NULL;
 }
 
-/* Bytes appended to the chunk under a new bufferView, *view its index. */
-static rad_status add_view(packer *pk, json_t *root, const unsigned char *b,
-                           size_t len, json_int_t *view)
-{
-	size_t at = 0;
-	rad_status st = bin_append(pk, b, len, &at);
-	if (st)
-		return st;
-	json_t *views = json_object_get(root, "bufferViews");
-	if (!views) {
-		views = json_array();
-		json_object_set_new(root, "bufferViews", views);
-	}
-	json_t *v = json_object();
-	json_object_set_new(v, "buffer", json_integer(0));
-	json_object_set_new(v, "byteOffset", json_integer((json_int_t)at));
-	json_object_set_new(v, "byteLength", json_integer((json_int_t)len));
-	*view = (json_int_t)json_array_size(views);
-	json_array_append_new(views, v);
-	return RAD_OK;
-}
-
 /* Images with a uri: their bytes into the chunk, a bufferView each. */
 static rad_status pack_images(packer *pk, json_t *root)
 {
@@ -494,7 +377,7 @@ static rad_status pack_images(packer *pk, json_t *root)
 			              i, uri);
 		json_int_t view = 0;
 		if (!st)
-			st = add_view(pk, root, bytes, len, &view);
+			st = sio_pack_add_view(pk, root, bytes, len, &view);
 		free(bytes);
 		if (st)
 			return st;
@@ -531,7 +414,7 @@ static rad_status pack_photometry(packer *pk, json_t *root)
 		rad_status st = read_uri(pk, KIND_NODE, i, uri, 0, mime,
 		                         sizeof(mime), &bytes, &len);
 		if (!st)
-			st = add_view(pk, root, bytes, len, &view);
+			st = sio_pack_add_view(pk, root, bytes, len, &view);
 		free(bytes);
 		if (st)
 			return st;
@@ -585,11 +468,13 @@ static rad_status write_glb(packer *pk, const char *json, unsigned char **glb,
 	return RAD_OK;
 }
 
-rad_status sio_pack(const unsigned char *json, size_t len, const char *dir,
-                    unsigned char **glb, size_t *glb_len, sio_pack_info *info,
-                    rad_error *err)
+/* sio_pack, and a GLB's repacking (pk->glb_bin), with luminaires. */
+static rad_status pack_doc(packer pk, const unsigned char *json, size_t len,
+                           const sio_luminaire *lum, size_t nlum,
+                           unsigned char **glb, size_t *glb_len,
+                           sio_pack_info *info, rad_error *err)
 {
-	packer pk = {.dir = dir, .err = err};
+	const char *dir = pk.dir;
 	json_error_t je;
 	size_t *base = NULL;
 	char *text = NULL;
@@ -616,7 +501,9 @@ rad_status sio_pack(const unsigned char *json, size_t len, const char *dir,
 	if ((st = pack_buffers(&pk, buffers, &base)) ||
 	    (st = move_views(&pk, json_object_get(root, "bufferViews"), base,
 	                     nbuffers)) ||
-	    (st = pack_images(&pk, root)) || (st = pack_photometry(&pk, root)))
+	    (st = pack_images(&pk, root)) ||
+	    (st = pack_photometry(&pk, root)) ||
+	    (st = sio_pack_luminaires(&pk, root, lum, nlum)))
 		goto done;
 	if (nbuffers || pk.nbin) {
 		json_t *one = json_object();
@@ -642,8 +529,23 @@ done:
 	return st;
 }
 
+rad_status sio_pack(const unsigned char *json, size_t len, const char *dir,
+                    unsigned char **glb, size_t *glb_len, sio_pack_info *info,
+                    rad_error *err)
+{
+	packer pk = {.dir = dir, .err = err};
+	return pack_doc(pk, json, len, NULL, 0, glb, glb_len, info, err);
+}
+
 rad_status sio_scene_read(const char *path, unsigned char **out, size_t *len,
                           sio_pack_info *info, rad_error *err)
+{
+	return sio_scene_read_lum(path, NULL, 0, out, len, info, err);
+}
+
+rad_status sio_scene_read_lum(const char *path, const sio_luminaire *lum,
+                              size_t nlum, unsigned char **out, size_t *len,
+                              sio_pack_info *info, rad_error *err)
 {
 	unsigned char *bytes;
 	size_t n;
@@ -655,7 +557,7 @@ rad_status sio_scene_read(const char *path, unsigned char **out, size_t *len,
 		return rad_fail(err, RAD_ERR_INVALID,
 		                "%s: the scene file is " SIO_LFS_HINT, path);
 	}
-	if (st || sio_is_glb(bytes, n)) {
+	if (st || (sio_is_glb(bytes, n) && nlum == 0)) {
 		*out = st ? NULL : bytes;
 		*len = st ? 0 : n;
 		return st;
@@ -668,7 +570,14 @@ rad_status sio_scene_read(const char *path, unsigned char **out, size_t *len,
 		snprintf(dir, sizeof(dir), "/");
 	else
 		snprintf(dir, sizeof(dir), "%.*s", (int)(slash - path), path);
-	st = sio_pack(bytes, n, dir, out, len, info, err);
+	packer pk = {.dir = dir, .err = err};
+	const unsigned char *json = bytes;
+	size_t njson = n;
+	if (sio_is_glb(bytes, n)) /* luminaires to add: repack it */
+		st = sio_glb_split(bytes, n, &json, &njson, &pk.glb_bin,
+		                   &pk.nglb_bin, err);
+	if (!st)
+		st = pack_doc(pk, json, njson, lum, nlum, out, len, info, err);
 	free(bytes);
 	if (st && err) {
 		/* Name the file: the pack's messages name only the part. */

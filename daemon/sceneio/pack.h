@@ -57,6 +57,14 @@ int sio_is_lfs_pointer(const unsigned char *bytes, size_t len);
 #define SIO_LFS_HINT                                                           \
 	"a Git LFS pointer, not the file's content: run git lfs pull"
 
+/* A photometric file the user names for a light (--luminaire NAME=FILE):
+ * every node named `light`, or carrying a KHR_lights_punctual light of
+ * that name, gets the file as if its extras named it
+ * (extras.luxrad_photometry). */
+typedef struct sio_luminaire {
+	const char *light, *file;
+} sio_luminaire;
+
 /*
  * A scene file as one set of bytes: a GLB as it is, a .gltf packed with
  * the files beside it (sio_pack, dir = the file's folder).  *out is
@@ -64,5 +72,11 @@ int sio_is_lfs_pointer(const unsigned char *bytes, size_t len);
  */
 rad_status sio_scene_read(const char *path, unsigned char **out, size_t *len,
                           sio_pack_info *info, rad_error *err);
+/* The same with luminaires attached (a GLB is then repacked).  A light
+ * no node carries, or a file that cannot be read, is RAD_ERR_INVALID /
+ * RAD_ERR_IO naming it; the file is parsed when the scene loads. */
+rad_status sio_scene_read_lum(const char *path, const sio_luminaire *lum,
+                              size_t nlum, unsigned char **out, size_t *len,
+                              sio_pack_info *info, rad_error *err);
 
 #endif

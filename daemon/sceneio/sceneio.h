@@ -90,23 +90,6 @@ rad_status sio_load(const void *bytes, size_t len, rad_scene **scene,
                     rad_error *err);
 void sio_sensors_free(sio_sensor *s);
 
-/*
- * Called with each light as the import is about to add it to the scene
- * (node_name: the glTF node's name, "" for none; d->name: the light's
- * name, else the node's).  d may be changed -- a tool attaches a
- * luminaire's candela table, whose grid must outlive the call to
- * sio_load_hooked.  d->c0_axis holds the node's local +X in world space
- * (C = 0 of a luminaire; gamma 0 is the light's direction, local -Z).
- * A status other than RAD_OK stops the import with it.
- */
-typedef rad_status (*sio_light_hook)(void *ud, const char *node_name,
-                                     rad_light_desc *d, rad_error *err);
-
-/* sio_load of a scene alone, each light offered to hook first. */
-rad_status sio_load_hooked(const void *bytes, size_t len, sio_light_hook hook,
-                           void *ud, rad_scene **scene, sio_info *info,
-                           rad_error *err);
-
 /* sio_scene_read() (pack.h: a .gltf packed with the files beside it)
  * then sio_load() without sensors.  For local tools and tests only: the
  * daemon never reads a path a client names. */

@@ -3,9 +3,10 @@
 facing up) and a point light node "lamp" 3 m above it, aimed down (local
 -Z to -Y), glTF intensity 50 cd.
 
-Usage: lamp_scene.py OUT.gltf [PHOTOMETRIC_FILE]
+Usage: lamp_scene.py OUT.gltf|OUT.glb [PHOTOMETRIC_FILE]
 With PHOTOMETRIC_FILE, the lamp's node names it in its extras
-(luxrad_photometry), a path beside OUT.gltf.
+(luxrad_photometry), a path beside OUT.gltf.  OUT.glb: a GLB, the
+buffer in its binary chunk.
 """
 import base64
 import json
@@ -37,5 +38,14 @@ doc = {
     "buffers": [{"byteLength": len(buf), "uri":
                  "data:application/octet-stream;base64," +
                  base64.b64encode(buf).decode()}]}
-with open(sys.argv[1], "w") as f:
-    json.dump(doc, f)
+if sys.argv[1].endswith(".glb"):
+    doc["buffers"] = [{"byteLength": len(buf)}]
+    text = json.dumps(doc).encode()
+    text += b" " * (-len(text) % 4)
+    body = (struct.pack("<II", len(text), 0x4E4F534A) + text +
+            struct.pack("<II", len(buf), 0x004E4942) + buf)
+    with open(sys.argv[1], "wb") as f:
+        f.write(struct.pack("<III", 0x46546C67, 2, 12 + len(body)) + body)
+else:
+    with open(sys.argv[1], "w") as f:
+        json.dump(doc, f)

@@ -446,13 +446,37 @@ expect_exit "submit a scene whose node names its IES file" 0
 LUMJOB=$(cat "$TMP/out")
 run watch "$LUMJOB"
 printf '0 0 0 0 1 0\n' >"$TMP/lum/pt.txt"
-run query "$LUMJOB" --points "$TMP/lum/pt.txt" --json
-check_py "the daemon reads the floor under the IES file (I0 / 9)" '
+# check_ies_lux NAME JOB: the floor under the lamp reads I0 / 9 lux.
+check_ies_lux() {
+	run query "$2" --points "$TMP/lum/pt.txt" --json
+	check_py "$1" '
 import json, math, sys
 lux = json.load(open(sys.argv[1]))["lux"][0]
 want = 1000 / math.pi / 9
 assert abs(lux - want) <= 0.005 * want, (lux, want)
 ' "$TMP/out"
+}
+check_ies_lux "the daemon reads the floor under the IES file (I0 / 9)" \
+	"$LUMJOB"
+# The same luminaire named on the command line, for a .gltf and a GLB
+# that do not name it: the file travels with the scene all the same.
+"$PY" "$(dirname "$0")/lamp_scene.py" "$TMP/lum/plain.gltf"
+"$PY" "$(dirname "$0")/lamp_scene.py" "$TMP/lum/plain.glb"
+for f in plain.gltf plain.glb; do
+	run submit "$TMP/lum/$f" --luminaire "lamp=$TMP/lum/down.ies" --solve \
+		--threads 1
+	expect_exit "submit $f --luminaire lamp=down.ies" 0
+	J=$(cat "$TMP/out")
+	run watch "$J"
+	check_ies_lux "$f: the floor reads the IES file named on the command line" \
+		"$J"
+done
+run submit "$TMP/lum/plain.gltf" --luminaire "desk=$TMP/lum/down.ies"
+expect_exit "submit --luminaire for a light the scene lacks" 2 \
+	"no light of that name"
+run submit "$TMP/lum/plain.gltf" --luminaire "lamp"
+expect_exit "submit --luminaire without =FILE" 2 "expected NAME=FILE"
+
 run report "$LUMJOB" -o "$TMP/lum/report.html"
 expect_exit "report on the luminaire's job" 0
 check_py "the report lists the photometric luminaire and its lumens" '
