@@ -74,6 +74,7 @@
 #include <xmmintrin.h>
 #endif
 
+#include "moments.h"
 #include "par.h"
 #include "rad.h"
 #include "scene.h"
@@ -469,39 +470,6 @@ static void trace_path(const tracer *tr, v3 x, v3 n, rng *r, double out[3])
 	}
 	for (int c = 0; c < 3; c++)
 		out[c] = M_PI * sum[c];
-}
-
-/* ------------------------------------------------------------ statistics */
-
-/* Count, mean and sum of squared deviations of per-path lux values. */
-typedef struct moments {
-	double n, mean, m2;
-} moments;
-
-static void moments_add(moments *m, double x)
-{
-	m->n += 1.0;
-	double d = x - m->mean;
-	m->mean += d / m->n;
-	m->m2 += d * (x - m->mean);
-}
-
-/* Chan et al.'s pairwise update: a := a + b. */
-static void moments_merge(moments *a, const moments *b)
-{
-	if (b->n == 0)
-		return;
-	double n = a->n + b->n, d = b->mean - a->mean;
-	a->mean += d * b->n / n;
-	a->m2 += b->m2 + d * d * a->n * b->n / n;
-	a->n = n;
-}
-
-static double moments_stderr(const moments *m)
-{
-	if (m->n < 2)
-		return NAN;
-	return sqrt(fmax(0.0, m->m2) / (m->n - 1) / m->n);
 }
 
 /* ------------------------------------------------------------ the driver */
