@@ -1,8 +1,8 @@
 /*
  * commit.c -- a scene's commit: pairs of triangles merged into quads,
  * bounds, the large polygons cut where others cross them (conform.c),
- * flux totals, then the BVH (vis.c); and the scene's end, which frees
- * what commit built with the rest.
+ * two-sided polygons' back faces, flux totals, then the BVH (vis.c); and
+ * the scene's end, which frees what commit built with the rest.
  *
  * DESIGN
  * - At commit, pairs of triangles that share an edge and together form a
@@ -11,6 +11,12 @@
  *   Matching is greedy in input order, each triangle preferring its
  *   longest edge as the diagonal, which pairs the usual grid
  *   triangulations into their cells rather than into skewed neighbours.
+ * - Triangles offered with their own reflectance (a textured surface)
+ *   merge when they came with the same material; the quad reflects their
+ *   area-weighted mean, and materials no polygon uses any more are
+ *   dropped.
+ * - After the cuts, each two-sided polygon gets its back face, appended
+ *   after every polygon the BVH holds (make_back_faces).
  * - A failed commit leaves the scene uncommitted and may be retried (the
  *   merge is skipped once done: s->stage is gone); once merged, the scene
  *   takes no more triangles.
