@@ -187,6 +187,17 @@ static void print_text_scene(const report *r)
 	printf("  meshes %u, primitives %u (%u skipped), loaded in %.3f s\n",
 	       r->info->meshes, r->info->primitives,
 	       r->info->primitives_skipped, r->lg->load_seconds);
+	if (c->back_faces)
+		printf("  two-sided: %u back faces (among the polygons)\n",
+		       c->back_faces);
+	if (r->info->textures_read || r->info->textures_ignored)
+		printf("  textures: %u read (%u images decoded, %u triangles), "
+		       "%u ignored\n",
+		       r->info->textures_read, r->info->images_decoded,
+		       r->info->textured_triangles, r->info->textures_ignored);
+	if (r->info->photometric_lights)
+		printf("  photometric lights: %u\n",
+		       r->info->photometric_lights);
 	if (r->info->warnings[0])
 		printf("  glTF warnings: %s\n", r->info->warnings);
 }
