@@ -6,10 +6,13 @@
  * parse builds and commits a rad_scene and reads the document's sensor
  * nodes: every mesh primitive of mode TRIANGLES in the default scene (or
  * all root nodes when there is none), with node transforms (matrix or
- * TRS, nested) applied; materials from baseColorFactor (reflectance) and
- * emissiveFactor x KHR_materials_emissive_strength (luminance, cd/m2);
- * KHR_lights_punctual lights.  Malformed input gets RAD_ERR_INVALID and a
- * message naming the accessor / mesh / node and what is wrong.
+ * TRS, nested) applied; materials from baseColorFactor times the base
+ * colour texture's mean under each triangle (reflectance), doubleSided
+ * (both faces), emissiveFactor x KHR_materials_emissive_strength
+ * (luminance, cd/m2); KHR_lights_punctual lights, with the photometric
+ * file a node names (extras.luxrad_photometry, packed).  Malformed input
+ * gets RAD_ERR_INVALID and a message naming the accessor / mesh / node
+ * and what is wrong.
  *
  * Export writes triangle meshes with optional per-vertex COLOR_0 and a
  * custom _ILLUMINANCE attribute (scalar float, lux) as GLB or .gltf bytes
