@@ -135,11 +135,6 @@ static void prog_destroy(rad_solver *sv)
 	sv->impl = NULL;
 }
 
-static double luma_d(const double c[3])
-{
-	return RAD_LUMA_R * c[0] + RAD_LUMA_G * c[1] + RAD_LUMA_B * c[2];
-}
-
 /* Leaf ids below element id, depth first; counted only when out is NULL. */
 static void leaf_ids(const rad_hier *h, uint32_t id, uint32_t *out, uint32_t *n)
 {
@@ -213,7 +208,7 @@ static double would_shoot(const rad_solver *sv, const prog_impl *p, uint32_t i,
 	const rad_material *m = rad_elem_mat(&sv->h, e);
 	for (int k = 0; k < 3; k++)
 		dB[k] = p->unshot[3 * (size_t)i + k] + m->rho[k] * amb[k];
-	return fabs(luma_d(dB)) * e->area;
+	return fabs(rad_luma3(dB)) * e->area;
 }
 
 /* Cohen's ambient estimate: the radiosity all unshot energy will still
@@ -397,7 +392,7 @@ static void eval_item(const shot *sh, rcv_item *it)
 		}
 		for (int c = 0; c < 3; c++)
 			it->dI[c] += f * amount[c];
-		it->spread = fmax(it->spread, spread * fabs(luma_d(amount)));
+		it->spread = fmax(it->spread, spread * fabs(rad_luma3(amount)));
 	}
 }
 
@@ -470,7 +465,7 @@ static void apply(rad_solver *sv, prog_impl *p, const rcv_item *it)
 		e->B[k] = (float)(m->emit[k] + m->rho[k] * I);
 		U[k] += m->rho[k] * it->dI[k] * w;
 	}
-	p->flux_received += luma_d(it->dI) * e->area;
+	p->flux_received += rad_luma3(it->dI) * e->area;
 }
 
 /*

@@ -73,11 +73,6 @@
 static double gather_point(gather *g, const rad_hier *h, const rad_vis *vis,
                            v3 x, v3 n, double tau, double floor, int nested);
 
-static double luma_d(const double c[3])
-{
-	return RAD_LUMA_R * c[0] + RAD_LUMA_G * c[1] + RAD_LUMA_B * c[2];
-}
-
 static void add_error(gather *g, double e)
 {
 	g->err2 += e * e;
@@ -371,7 +366,7 @@ static double gather_point(gather *g, const rad_hier *h, const rad_vis *vis,
 	for (uint32_t l = 0; l < s->nlights; l++) {
 		const rad_light *L = &s->lights[l];
 		g->total += rad_light_point(vis, L, x, n, NULL) *
-		            luma_d(L->intensity);
+		            rad_luma3(L->intensity);
 	}
 	g->direct = g->total;
 	if (s->npolys > 0)

@@ -142,15 +142,10 @@ typedef struct tracer {
 	emitters em;
 } tracer;
 
-static double luma3(const double c[3])
-{
-	return RAD_LUMA_R * c[0] + RAD_LUMA_G * c[1] + RAD_LUMA_B * c[2];
-}
-
 static double luma_f(const float c[3])
 {
 	const double d[3] = {c[0], c[1], c[2]};
-	return luma3(d);
+	return rad_luma3(d);
 }
 
 static rad_status emitters_build(emitters *em, const rad_scene *s, rad_mem *mem,
@@ -522,7 +517,7 @@ static void run_chunks(void *ud, size_t begin, size_t end, int thread)
 			rng r = rng_key(rn->tr->seed, c->point, c->first + j);
 			double rgb[3];
 			trace_path(rn->tr, ps->x, ps->n, &r, rgb);
-			moments_add(&c->mo, ps->direct + luma3(rgb));
+			moments_add(&c->mo, ps->direct + rad_luma3(rgb));
 		}
 	}
 }
@@ -695,7 +690,7 @@ static void init_points(const tracer *tr, const double *pts, size_t n,
 		ps->n = v3_norm(v3_d(pts + 6 * i + 3));
 		double e[3];
 		lights_at(tr, ps->x, ps->n, NULL, e);
-		ps->direct = luma3(e);
+		ps->direct = rad_luma3(e);
 		ps->pending = first;
 	}
 }

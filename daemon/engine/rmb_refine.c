@@ -120,17 +120,12 @@ static void node_dB(const rad_solver *sv, uint32_t t, double out[3])
 		node_exposed_emission(&sv->h, t, out);
 }
 
-static double luma3(const double c[3])
-{
-	return RAD_LUMA_R * c[0] + RAD_LUMA_G * c[1] + RAD_LUMA_B * c[2];
-}
-
 /* Increments are signed only by rounding: judge their magnitude. */
 static double node_luma_dB(const rad_solver *sv, uint32_t t)
 {
 	double d[3];
 	node_dB(sv, t, d);
-	return fabs(luma3(d));
+	return fabs(rad_luma3(d));
 }
 
 /*
@@ -255,8 +250,8 @@ static rad_status gather(rad_solver *sv, uint32_t r, uint32_t s, double ff,
 	double fe = ff * node_emit_factor(&sv->h, r, s, 1);
 	for (int c = 0; c < 3; c++)
 		I[c] += (float)(fe * d[c]);
-	node_took(&sv->h, r, s, fe * luma3(d));
-	double b = fabs(luma3(d));
+	node_took(&sv->h, r, s, fe * rad_luma3(d));
+	double b = fabs(rad_luma3(d));
 	if (!node_is_cluster(r)) {
 		rad_status rs = track_err(sv, st, r, link_err(sv, b, spread));
 		if (rs)

@@ -58,11 +58,6 @@ typedef struct leaf_list {
 	int nomem;
 } leaf_list;
 
-static double luma(const double c[3])
-{
-	return RAD_LUMA_R * c[0] + RAD_LUMA_G * c[1] + RAD_LUMA_B * c[2];
-}
-
 static void on_leaf(void *ud, uint32_t node, const double p[4][3], int nv,
                     const double B[3], const double I[3])
 {
@@ -102,7 +97,7 @@ static void on_leaf(void *ud, uint32_t node, const double p[4][3], int nv,
 	f->area = (float)(0.5 * len);
 	for (int k = 0; k < 3; k++)
 		f->n[k] = len > 0 ? (float)(c[k] / len) : 0.0f;
-	f->lux = (float)luma(I);
+	f->lux = (float)rad_luma3(I);
 	f->node = node;
 	f->nv = nv;
 	int ok = isfinite(f->lux) && isfinite(f->area);
@@ -124,7 +119,7 @@ static int cmp_float(const void *a, const void *b)
 	return (x > y) - (x < y);
 }
 
-/* The automatic white point: WHITE_PCTILE of the leaves' luma(B). */
+/* The automatic white point: WHITE_PCTILE of the leaves' rad_luma3(B). */
 static rad_status auto_white(const leaf_list *L, double *white, rad_error *err)
 {
 	float *v = malloc(L->n * sizeof(float));
@@ -132,7 +127,7 @@ static rad_status auto_white(const leaf_list *L, double *white, rad_error *err)
 		return rad_fail(err, RAD_ERR_NOMEM, "export: out of memory");
 	for (size_t i = 0; i < L->n; i++) {
 		double B[3] = {L->v[i].B[0], L->v[i].B[1], L->v[i].B[2]};
-		v[i] = (float)luma(B);
+		v[i] = (float)rad_luma3(B);
 	}
 	qsort(v, L->n, sizeof(float), cmp_float);
 	*white = v[(size_t)floor(WHITE_PCTILE * (double)(L->n - 1))];

@@ -827,6 +827,12 @@ double rad_seconds(void);
 #define RAD_LUMA_G 0.7152
 #define RAD_LUMA_B 0.0722
 
+/* The photopic value of an RGB triple (lux from RGB lux...). */
+static inline double rad_luma3(const double c[3])
+{
+	return RAD_LUMA_R * c[0] + RAD_LUMA_G * c[1] + RAD_LUMA_B * c[2];
+}
+
 #ifdef __cplusplus
 }
 #endif

@@ -143,11 +143,6 @@ static srv_scene *req_scene(cmd_req *r)
  */
 #define LUMINAIRES_MAX 256
 
-static double luma3(const double c[3])
-{
-	return RAD_LUMA_R * c[0] + RAD_LUMA_G * c[1] + RAD_LUMA_B * c[2];
-}
-
 static json_t *lights_json(const rad_scene *sc, uint32_t n)
 {
 	static const char *const kinds[] = {"point", "spot", "directional"};
@@ -160,7 +155,7 @@ static json_t *lights_json(const rad_scene *sc, uint32_t n)
 		        "{s:s, s:s, s:f}", "name", l.name ? l.name : "", "kind",
 		        kinds[l.kind <= RAD_LIGHT_DIRECTIONAL ? l.kind : 0],
 		        l.kind == RAD_LIGHT_DIRECTIONAL ? "lux" : "candela",
-		        luma3(l.intensity));
+		        rad_luma3(l.intensity));
 		if (l.kind != RAD_LIGHT_DIRECTIONAL)
 			json_object_set_new(o, "position",
 			                    json_pack("[fff]", l.position[0],
@@ -176,7 +171,7 @@ static json_t *lights_json(const rad_scene *sc, uint32_t n)
 			        o, "outer_cone_deg",
 			        json_real(l.outer_cone * 180 / M_PI));
 		if (l.candela) { /* a photometric file's table */
-			double k = luma3(l.intensity);
+			double k = rad_luma3(l.intensity);
 			json_object_set_new(o, "kind",
 			                    json_string("photometric"));
 			json_object_set_new(
@@ -210,7 +205,7 @@ static json_t *luminaires_json(const srv_scene *s)
 		                  rad_scene_node_name(s->scene, em[i].node),
 		                  "polygons", (int)em[i].polygons, "area",
 		                  em[i].area_m2, "exitance_lux",
-		                  luma3(em[i].exitance), "flux_lm",
+		                  rad_luma3(em[i].exitance), "flux_lm",
 		                  em[i].flux_lm));
 	return json_pack("{s:o, s:o, s:b}", "lights",
 	                 lights_json(s->scene, s->counts.lights), "emitters",
