@@ -153,11 +153,9 @@ static rad_status quad_material(rad_scene *s, uint32_t t, uint32_t u,
 	rad_material m = s->mats[pt->mat];
 	const rad_material *mu = &s->mats[pu->mat];
 	double at = pt->area, au = pu->area;
-	for (int c = 0; c < 3; c++) {
-		float r =
-		        (float)((at * m.rho[c] + au * mu->rho[c]) / (at + au));
-		m.rho[c] = r < 1.0f ? r : nextafterf(1.0f, 0.0f);
-	}
+	for (int c = 0; c < 3; c++)
+		m.rho[c] = rad_rho_float((at * m.rho[c] + au * mu->rho[c]) /
+		                         (at + au));
 	return rad_scene_material_id(s, &m, &pt->mat, err);
 }
 

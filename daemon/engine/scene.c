@@ -77,14 +77,6 @@ rad_status rad_scene_check_open(const rad_scene *s, const char *what,
 
 /* ------------------------------------------------------------ materials */
 
-/* Reflectance as stored: values just below 1 must not round up to 1.0f,
- * which would make a lossless surface out of a valid input. */
-static float rho_float(double r)
-{
-	float f = (float)r;
-	return f < 1.0f ? f : nextafterf(1.0f, 0.0f);
-}
-
 static rad_status make_material(const double rho[3], const double lum[3],
                                 uint32_t which, rad_material *m, rad_error *err)
 {
@@ -101,7 +93,7 @@ static rad_status make_material(const double rho[3], const double lum[3],
 			                "material %u: luminance (%g, %g, %g) "
 			                "cd/m2 must be finite and >= 0",
 			                which, lum[0], lum[1], lum[2]);
-		m->rho[c] = rho_float(rho[c]);
+		m->rho[c] = rad_rho_float(rho[c]);
 		m->emit[c] = (float)e;
 	}
 	return RAD_OK;
@@ -396,7 +388,7 @@ rad_status rad_scene_add_surface(rad_scene *s, const rad_surface_desc *d,
 		if (rho) {
 			rad_material m = s->mats[material];
 			for (int c = 0; c < 3; c++)
-				m.rho[c] = rho_float(rho[3 * i + c]);
+				m.rho[c] = rad_rho_float(rho[3 * i + c]);
 			if ((st = rad_scene_material_id(s, &m, &p->mat, err)))
 				return st;
 		}

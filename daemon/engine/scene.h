@@ -31,6 +31,14 @@ typedef struct rad_material {
 	float emit[3]; /* exitance per channel, lux (pi x luminance) */
 } rad_material;
 
+/* Reflectance as stored: values just below 1 must not round up to 1.0f,
+ * which would make a lossless surface out of a valid input. */
+static inline float rad_rho_float(double r)
+{
+	float f = (float)r;
+	return f < 1.0f ? f : nextafterf(1.0f, 0.0f);
+}
+
 /* 1 if material m emits in some channel. */
 static inline int rad_material_emits(const rad_material *m)
 {
