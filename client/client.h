@@ -128,6 +128,8 @@ typedef struct lx_conn {
 	json_t *hello;   /* the hello reply (limits, capabilities) */
 } lx_conn;
 
+#define LX_LIGHT_NAME_MAX 256 /* a --luminaire NAME, with the NUL */
+
 typedef struct lx_ctx {
 	const char *cmd;               /* the command name */
 	const char *val[LX_OPT_COUNT]; /* option values (last one wins) */

@@ -118,35 +118,20 @@ static int read_scene(lx_ctx *cx, const char *path, unsigned char **out,
 		                      path, strerror(e));
 	if (st.st_size == 0)
 		return lx_usage_error(cx, "scene file '%s' is empty", path);
-	sio_luminaire *lum = calloc((size_t)cx->nluminaires + 1, sizeof *lum);
-	if (!lum)
-		return lx_usage_error(cx, "out of memory");
-	char **names = calloc((size_t)cx->nluminaires + 1, sizeof *names);
-	int rc = names ? 0 : lx_usage_error(cx, "out of memory");
-	for (int k = 0; !rc && k < cx->nluminaires; k++) {
-		const char *spec = cx->luminaires[k], *eq = strchr(spec, '=');
-		if (!eq || eq == spec || !eq[1]) {
-			rc = lx_usage_error(cx,
-			                    "--luminaire: invalid value '%s' "
-			                    "(expected NAME=FILE)",
-			                    spec);
-			break;
-		}
-		names[k] = strndup(spec, (size_t)(eq - spec));
-		if (!names[k]) {
-			rc = lx_usage_error(cx, "out of memory");
-			break;
-		}
-		lum[k] = (sio_luminaire){names[k], eq + 1};
-	}
-	if (!rc && sio_scene_read_lum(path, lum, (size_t)cx->nluminaires, out,
-	                              len, NULL, &err) != RAD_OK)
-		rc = lx_usage_error(cx, "%s", err.msg);
-	for (int k = 0; names && k < cx->nluminaires; k++)
-		free(names[k]);
+	size_t n = (size_t)cx->nluminaires;
+	sio_luminaire *lum = calloc(n + 1, sizeof *lum);
+	char(*names)[LX_LIGHT_NAME_MAX] = calloc(n + 1, sizeof *names);
+	rad_status rs =
+	        lum && names ? RAD_OK
+	                     : rad_fail(&err, RAD_ERR_NOMEM, "out of memory");
+	for (size_t k = 0; k < n && !rs; k++)
+		rs = sio_luminaire_spec(cx->luminaires[k], names[k],
+		                        sizeof names[k], &lum[k], &err);
+	if (!rs)
+		rs = sio_scene_read_lum(path, lum, n, out, len, NULL, &err);
 	free(names);
 	free(lum);
-	return rc;
+	return rs ? lx_usage_error(cx, "%s", err.msg) : 0;
 }
 
 /* The scene's default name: the file name without directory and suffix. */

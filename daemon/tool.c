@@ -16,12 +16,11 @@
 int tool_luminaire_arg(tool_luminaires *l, const char *spec, char *msg,
                        size_t len)
 {
-	const char *eq = strchr(spec, '=');
-	if (!eq || eq == spec || !eq[1])
-		return rp_cli_fail(msg, len,
-		                   "--luminaire: invalid value '%s' (expected "
-		                   "NAME=FILE)",
-		                   spec);
+	char light[TOOL_LIGHT_NAME_MAX];
+	sio_luminaire one;
+	rad_error err;
+	if (sio_luminaire_spec(spec, light, sizeof light, &one, &err) != RAD_OK)
+		return rp_cli_fail(msg, len, "%s", err.msg);
 	if (l->n >= TOOL_MAX_LUMINAIRES)
 		return rp_cli_fail(msg, len,
 		                   "--luminaire: more than %d of them",
@@ -37,25 +36,23 @@ int tool_scene_load(const char *prog, const char *path,
                     double *seconds)
 {
 	sio_luminaire named[TOOL_MAX_LUMINAIRES];
-	char light[TOOL_MAX_LUMINAIRES][256];
+	char light[TOOL_MAX_LUMINAIRES][TOOL_LIGHT_NAME_MAX];
 	int n = lum ? lum->n : 0;
-	for (int k = 0; k < n; k++) { /* NAME=FILE, checked when parsed */
-		const char *spec = lum->spec[k], *eq = strchr(spec, '=');
-		snprintf(light[k], sizeof light[k], "%.*s", (int)(eq - spec),
-		         spec);
-		named[k] = (sio_luminaire){light[k], eq + 1};
-	}
 	unsigned char *bytes = NULL;
 	size_t len = 0;
 	rad_error err = {0};
+	rad_status st = RAD_OK;
 	*seconds = 0;
-	if (sio_scene_read_lum(path, named, (size_t)n, &bytes, &len, NULL,
-	                       &err) != RAD_OK) {
+	for (int k = 0; k < n && !st; k++) /* checked when parsed */
+		st = sio_luminaire_spec(lum->spec[k], light[k], sizeof light[k],
+		                        &named[k], &err);
+	if (st || sio_scene_read_lum(path, named, (size_t)n, &bytes, &len, NULL,
+	                             &err) != RAD_OK) {
 		fprintf(stderr, "%s: %s\n", prog, err.msg);
 		return TOOL_FAIL;
 	}
 	double t0 = rad_seconds();
-	rad_status st = sio_load(bytes, len, sc, info, NULL, NULL, &err);
+	st = sio_load(bytes, len, sc, info, NULL, NULL, &err);
 	*seconds = rad_seconds() - t0;
 	free(bytes);
 	if (st != RAD_OK) {

@@ -26,6 +26,7 @@ enum { TOOL_OK = 0, TOOL_FAIL = 1, TOOL_USAGE = 2 };
  * with the scene (sio_scene_read_lum), as luxrad submit does.
  */
 #define TOOL_MAX_LUMINAIRES 64
+#define TOOL_LIGHT_NAME_MAX 256 /* bytes with the NUL */
 
 typedef struct tool_luminaires {
 	const char *spec[TOOL_MAX_LUMINAIRES]; /* "NAME=FILE", from argv */

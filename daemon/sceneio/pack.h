@@ -65,6 +65,12 @@ typedef struct sio_luminaire {
 	const char *light, *file;
 } sio_luminaire;
 
+/* A --luminaire value "NAME=FILE" as a luminaire: NAME copied into
+ * light[len], file pointing into spec.  RAD_ERR_INVALID, in the words a
+ * command line shows, when it is not NAME=FILE or NAME does not fit. */
+rad_status sio_luminaire_spec(const char *spec, char *light, size_t len,
+                              sio_luminaire *out, rad_error *err);
+
 /*
  * A scene file as one set of bytes: a GLB as it is, a .gltf packed with
  * the files beside it (sio_pack, dir = the file's folder).  *out is

@@ -59,6 +59,26 @@ rad_status sio_glb_split(const unsigned char *b, size_t len,
 	return RAD_OK;
 }
 
+rad_status sio_luminaire_spec(const char *spec, char *light, size_t len,
+                              sio_luminaire *out, rad_error *err)
+{
+	const char *eq = strchr(spec, '=');
+	if (!eq || eq == spec || !eq[1])
+		return rad_fail(err, RAD_ERR_INVALID,
+		                "--luminaire: invalid value '%.200s' (expected "
+		                "NAME=FILE)",
+		                spec);
+	if ((size_t)(eq - spec) >= len)
+		return rad_fail(err, RAD_ERR_INVALID,
+		                "--luminaire: the light's name is longer than "
+		                "%zu bytes",
+		                len - 1);
+	memcpy(light, spec, (size_t)(eq - spec));
+	light[eq - spec] = '\0';
+	*out = (sio_luminaire){light, eq + 1};
+	return RAD_OK;
+}
+
 /* 1 if node carries a light named name, or is so named. */
 static int names_light(json_t *root, json_t *node, const char *name)
 {
