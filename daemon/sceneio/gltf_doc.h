@@ -54,9 +54,7 @@ enum {
 #define SIO_STRENGTH_EXT "KHR_materials_emissive_strength"
 #define SIO_TRANSFORM_EXT "KHR_texture_transform"
 #define SIO_SENSOR_EXTRA "luxrad_sensor" /* key in a node's extras */
-/* A node's photometric file: a path beside the scene, which packing
- * (pack.h) turns into {"bufferView": n, "name": path}. */
-#define SIO_PHOTOMETRY_EXTRA "luxrad_photometry"
+/* SIO_PHOTOMETRY_EXTRA, a node's photometric file: pack.h. */
 
 typedef struct sio_str {
 	const char *s; /* NUL-terminated at len */

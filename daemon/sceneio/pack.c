@@ -401,9 +401,9 @@ static rad_status pack_photometry(packer *pk, json_t *root)
 {
 	json_t *nodes = json_object_get(root, "nodes");
 	for (size_t i = 0; i < json_array_size(nodes); i++) {
-		json_t *extras =
-		        json_object_get(json_array_get(nodes, i), "extras");
-		json_t *ref = json_object_get(extras, "luxrad_photometry");
+		json_t *node = json_array_get(nodes, i);
+		json_t *ref = json_object_get(json_object_get(node, "extras"),
+		                              SIO_PHOTOMETRY_EXTRA);
 		const char *uri = json_string_value(ref);
 		if (!uri)
 			continue;
@@ -418,10 +418,7 @@ static rad_status pack_photometry(packer *pk, json_t *root)
 		free(bytes);
 		if (st)
 			return st;
-		json_t *packed = json_object();
-		json_object_set_new(packed, "bufferView", json_integer(view));
-		json_object_set_new(packed, "name", json_string(uri));
-		json_object_set_new(extras, "luxrad_photometry", packed);
+		sio_pack_photometry_ref(node, view, uri);
 	}
 	return RAD_OK;
 }

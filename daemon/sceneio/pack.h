@@ -15,6 +15,10 @@
 
 #include "rad.h"
 
+/* A node's photometric file, in its extras: a path beside the scene,
+ * which packing turns into {"bufferView": n, "name": path}. */
+#define SIO_PHOTOMETRY_EXTRA "luxrad_photometry"
+
 /* What packing did, for the scene's report. */
 typedef struct sio_pack_info {
 	unsigned buffers_read;    /* buffers read from files beside the scene */

@@ -1,6 +1,7 @@
 /*
  * pack_bin.c -- the packed GLB's binary chunk as it grows: bytes appended
- * at 8-byte boundaries, and bufferViews over them.
+ * at 8-byte boundaries, bufferViews over them, and the references nodes
+ * keep to the photometric files packed there.
  */
 #include <stdlib.h>
 #include <string.h>
@@ -54,4 +55,16 @@ rad_status sio_pack_add_view(packer *pk, json_t *root, const unsigned char *b,
 	*view = (json_int_t)json_array_size(views);
 	json_array_append_new(views, v);
 	return RAD_OK;
+}
+
+void sio_pack_photometry_ref(json_t *node, json_int_t view, const char *name)
+{
+	json_t *extras = json_object_get(node, "extras");
+	if (!json_is_object(extras)) {
+		extras = json_object();
+		json_object_set_new(node, "extras", extras);
+	}
+	json_object_set_new(
+	        extras, SIO_PHOTOMETRY_EXTRA,
+	        json_pack("{s:I, s:s}", "bufferView", view, "name", name));
 }

@@ -43,6 +43,10 @@ rad_status sio_pack_bin_append(packer *pk, const unsigned char *b, size_t n,
 rad_status sio_pack_add_view(packer *pk, json_t *root, const unsigned char *b,
                              size_t len, json_int_t *view);
 
+/* pack_bin.c: node's extras.luxrad_photometry made the packed reference
+ * to bufferView view, named by the file it came from. */
+void sio_pack_photometry_ref(json_t *node, json_int_t view, const char *name);
+
 /* pack_lum.c: the luminaires the user names attached to their lights'
  * nodes, their files in the chunk (as extras.luxrad_photometry). */
 rad_status sio_pack_luminaires(packer *pk, json_t *root,

@@ -128,15 +128,8 @@ rad_status sio_pack_luminaires(packer *pk, json_t *root,
 			}
 			if (st)
 				return st;
-			json_t *extras = json_object_get(node, "extras");
-			if (!json_is_object(extras)) {
-				extras = json_object();
-				json_object_set_new(node, "extras", extras);
-			}
-			json_object_set_new(
-			        extras, "luxrad_photometry",
-			        json_pack("{s:I, s:s}", "bufferView", view,
-			                  "name", base_name(lum[k].file)));
+			sio_pack_photometry_ref(node, view,
+			                        base_name(lum[k].file));
 			hits++;
 		}
 		if (!hits)
