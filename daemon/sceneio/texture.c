@@ -70,9 +70,8 @@ struct sio_texture {
 
 typedef struct sio_tex_slot {
 	sio_texture *t;
-	uint64_t used;  /* cache clock at last use */
-	int failed;     /* cannot be read: noted once */
-	unsigned loads; /* decodes so far */
+	uint64_t used; /* cache clock at last use */
+	int failed;    /* cannot be read: noted once */
 } sio_tex_slot;
 
 /* ------------------------------------------------------------ decoding */
@@ -337,6 +336,40 @@ static void texture_free(sio_texture *t)
 	free(t);
 }
 
+/* Halve a level's sides (each at least 1); 0 when it was 1 x 1. */
+static int halve(uint32_t *w, uint32_t *h)
+{
+	if (*w == 1 && *h == 1)
+		return 0;
+	*w = *w > 1 ? *w / 2 : 1;
+	*h = *h > 1 ? *h / 2 : 1;
+	return 1;
+}
+
+/* The sides level 0 keeps of a w x h image: at most MAX_KEEP texels. */
+static void kept_sides(uint32_t *w, uint32_t *h)
+{
+	while ((size_t)*w * *h > MAX_KEEP)
+		halve(w, h);
+}
+
+static size_t level_bytes(uint32_t w, uint32_t h)
+{
+	return (size_t)(w + 1) * 3 * h * sizeof(float);
+}
+
+/* What prepare() will hold for a w x h image, before it is made. */
+static size_t pyramid_bytes(uint32_t w, uint32_t h)
+{
+	size_t n = 0;
+	int k = 0;
+	kept_sides(&w, &h);
+	do
+		n += level_bytes(w, h);
+	while (++k < MAX_LEVELS && halve(&w, &h));
+	return n;
+}
+
 /* Level 0 (at most MAX_KEEP texels) and the pyramid down to 1 x 1. */
 static sio_texture *prepare(const raw *r)
 {
@@ -344,25 +377,18 @@ static sio_texture *prepare(const raw *r)
 	if (!t)
 		return NULL;
 	uint32_t w = r->w, h = r->h;
-	while ((size_t)w * h > MAX_KEEP) {
-		w = w > 1 ? w / 2 : 1;
-		h = h > 1 ? h / 2 : 1;
-	}
+	kept_sides(&w, &h);
 	rows src = {r->w, r->h, r, NULL};
-	for (;;) {
+	do {
 		level *lv = &t->lv[t->nlevels];
 		if (!resample(&src, w, h, lv)) {
 			texture_free(t);
 			return NULL;
 		}
-		t->bytes += (size_t)(w + 1) * 3 * h * sizeof(float);
+		t->bytes += level_bytes(w, h);
 		t->nlevels++;
-		if ((w == 1 && h == 1) || t->nlevels == MAX_LEVELS)
-			break;
 		src = (rows){w, h, NULL, lv};
-		w = w > 1 ? w / 2 : 1;
-		h = h > 1 ? h / 2 : 1;
-	}
+	} while (t->nlevels < MAX_LEVELS && halve(&w, &h));
 	return t;
 }
 
@@ -624,7 +650,8 @@ rad_status sio_tex_image(sio_tex_cache *c, int ii, const sio_texture **out,
 		image_bytes(c, ii, &b, &len, why, sizeof why);
 		int dec = b ? decode(b, len, &r, why, sizeof why) : DEC_BAD;
 		if (dec == DEC_OK) {
-			evict(c, 0);
+			/* Room first, so the pyramid is made within BUDGET. */
+			evict(c, pyramid_bytes(r.w, r.h));
 			s->t = prepare(&r);
 			free(r.px);
 			if (!s->t)
@@ -642,9 +669,7 @@ rad_status sio_tex_image(sio_tex_cache *c, int ii, const sio_texture **out,
 			         ii, c->d->images[ii].name.s, why);
 			return RAD_OK;
 		}
-		evict(c, s->t->bytes);
 		c->bytes += s->t->bytes;
-		s->loads++;
 		if (c->info)
 			c->info->images_decoded++;
 	}
