@@ -127,6 +127,19 @@ static rad_solver *solver_on(const rad_scene *s)
 	return sv;
 }
 
+/* The Monte Carlo reference at n points, `paths` paths each. */
+static void reference_lux(const rad_scene *s, const double *pts, size_t n,
+                          uint64_t paths, double *lux)
+{
+	rad_ref_options ro;
+	rad_error err;
+	rad_ref_options_default(&ro);
+	ro.samples = paths;
+	if (rad_reference_illuminance(s, pts, n, &ro, lux, NULL, NULL, &err) !=
+	    RAD_OK)
+		fail_msg("reference: %s", err.msg);
+}
+
 static void test_floor_under_the_luminaire_reads_the_file(void **state)
 {
 	(void)state;
@@ -158,12 +171,7 @@ static void test_floor_under_the_luminaire_reads_the_file(void **state)
 		}
 	rad_error err;
 	assert_int_equal(rad_solver_illuminance(sv, pts, N, lux, &err), RAD_OK);
-	rad_ref_options ro;
-	rad_ref_options_default(&ro);
-	ro.samples = 4;
-	assert_int_equal(rad_reference_illuminance(s, pts, N, &ro, ref, NULL,
-	                                           NULL, &err),
-	                 RAD_OK);
+	reference_lux(s, pts, N, 4, ref);
 	double worst = 0, worst_ref = 0;
 	for (int k = 0; k < N; k++) {
 		double e = fabs(lux[k] - want[k]) / want[k];
@@ -205,13 +213,7 @@ static double box_flux(const rad_scene *s, const double pos[3], int n)
 				p[3 + a] = f % 2 ? -1 : 1;
 			}
 	}
-	rad_ref_options ro;
-	rad_error err;
-	rad_ref_options_default(&ro);
-	ro.samples = 2;
-	assert_int_equal(rad_reference_illuminance(s, pts, np, &ro, lux, NULL,
-	                                           NULL, &err),
-	                 RAD_OK);
+	reference_lux(s, pts, np, 2, lux);
 	double sum = 0, da = 16.0 / ((double)n * n);
 	for (size_t q = 0; q < np; q++)
 		sum += lux[q] * da;
@@ -351,13 +353,7 @@ static void test_area_luminaire_matches_the_closed_form(void **state)
 			                                  NULL, &err),
 			                 RAD_OK);
 			rad_solver_free(sv);
-			rad_ref_options ro;
-			rad_ref_options_default(&ro);
-			ro.samples = 64;
-			assert_int_equal(
-			        rad_reference_illuminance(s, pts, 3, &ro, ref,
-			                                  NULL, NULL, &err),
-			        RAD_OK);
+			reference_lux(s, pts, 3, 64, ref);
 			for (int k = 0; k < 3; k++) {
 				double x = at[k][0], y = at[k][1];
 				double want =
