@@ -29,35 +29,35 @@
 
 #include "internal.h"
 
+/* The extensions the import reads. */
+static const char *const read_exts[] = {SIO_LIGHTS_EXT, SIO_STRENGTH_EXT,
+                                        SIO_TRANSFORM_EXT};
+/* Extensions that change nothing a diffuse solver reads. */
+static const char *const moot_exts[] = {
+        "KHR_materials_specular",  "KHR_materials_ior",
+        "KHR_materials_clearcoat", "KHR_materials_sheen",
+        "KHR_materials_unlit",     "KHR_mesh_quantization"};
+
+static int listed(sio_str ext, const char *const *list, size_t n)
+{
+	for (size_t k = 0; k < n; k++)
+		if (sio_str_is(ext, list[k]))
+			return 1;
+	return 0;
+}
+
+#define LISTED(ext, list) listed(ext, list, sizeof list / sizeof list[0])
+
 /* Refuse documents that need an extension we do not implement. */
 static rad_status check_required(const sio_doc *d, rad_error *err)
 {
-	for (size_t k = 0; k < d->nrequired; k++) {
-		sio_str ext = d->required[k];
-		if (!sio_str_is(ext, SIO_LIGHTS_EXT) &&
-		    !sio_str_is(ext, SIO_STRENGTH_EXT) &&
-		    !sio_str_is(ext, SIO_TRANSFORM_EXT))
+	for (size_t k = 0; k < d->nrequired; k++)
+		if (!LISTED(d->required[k], read_exts))
 			return rad_fail(err, RAD_ERR_UNSUPPORTED,
 			                "extensionsRequired: '%s' is not "
 			                "supported",
-			                ext.s);
-	}
+			                d->required[k].s);
 	return RAD_OK;
-}
-
-/* Extensions a document may use that change what is read. */
-static int understood(sio_str ext)
-{
-	static const char *const known[] = {
-	        SIO_LIGHTS_EXT, SIO_STRENGTH_EXT, SIO_TRANSFORM_EXT,
-	        /* change nothing a diffuse solver reads: */
-	        "KHR_materials_specular", "KHR_materials_ior",
-	        "KHR_materials_clearcoat", "KHR_materials_sheen",
-	        "KHR_materials_unlit", "KHR_mesh_quantization"};
-	for (size_t k = 0; k < sizeof known / sizeof known[0]; k++)
-		if (sio_str_is(ext, known[k]))
-			return 1;
-	return 0;
 }
 
 /* Say which extensions the document uses that the import does not read
@@ -68,7 +68,8 @@ static void note_unread(const sio_doc *d, sio_info *info)
 	char list[256] = "";
 	size_t n = 0;
 	for (size_t k = 0; k < d->nused && n + 1 < sizeof list; k++) {
-		if (understood(d->used[k]))
+		if (LISTED(d->used[k], read_exts) ||
+		    LISTED(d->used[k], moot_exts))
 			continue;
 		int w = snprintf(list + n, sizeof list - n, "%s%.60s",
 		                 n ? ", " : "", d->used[k].s);
@@ -133,8 +134,9 @@ static rad_status build(const sio_doc *d, rad_scene *s, sio_sensor_set *ss,
 		sio_tex_cache_free(&im.tex); /* before the BVH is built */
 		if (st == RAD_OK)
 			st = rad_scene_commit(s, err);
-		rad_scene_counts c;
-		rad_scene_counts_get(s, &c);
+		rad_scene_counts c = {0};
+		if (st == RAD_OK)
+			rad_scene_counts_get(s, &c);
 		if (st == RAD_OK && c.lights == 0 && c.emitters == 0)
 			sio_note(info,
 			         "the scene has no light (no emissive "
