@@ -42,18 +42,6 @@ static const float *stage_vertex(const float *stage, uint32_t t, int k)
 	return stage + (size_t)9 * t + 3 * (k % 3);
 }
 
-static uint32_t edge_hash(const float *a, const float *b)
-{
-	uint32_t h = 0x811c9dc5u;
-	for (int i = 0; i < 6; i++) {
-		uint32_t bits;
-		memcpy(&bits, i < 3 ? a + i : b + i - 3, sizeof(bits));
-		h = (h ^ bits) * 0x01000193u;
-		h ^= h >> 15;
-	}
-	return h * 0x9e3779b1u;
-}
-
 typedef struct edge_map {
 	const float *stage;
 	uint32_t *slot; /* t*3 + k of a directed edge, or RAD_NONE; SCRATCH */
@@ -69,7 +57,7 @@ static int same_point(const float *a, const float *b)
  * probe sequence. */
 static uint32_t *edge_probe(const edge_map *m, const float *a, const float *b)
 {
-	uint32_t i = edge_hash(a, b) & m->mask;
+	uint32_t i = rad_hash_floats6(a, b) & m->mask;
 	for (;; i = (i + 1) & m->mask) {
 		uint32_t e = m->slot[i];
 		if (e == RAD_NONE)

@@ -117,14 +117,7 @@ static int same_material(const rad_material *a, const rad_material *b)
 
 static uint32_t material_hash(const rad_material *m)
 {
-	uint32_t h = 0x811c9dc5u, bits[6];
-	memcpy(bits, m->rho, sizeof(m->rho));
-	memcpy(bits + 3, m->emit, sizeof(m->emit));
-	for (int i = 0; i < 6; i++) {
-		h = (h ^ bits[i]) * 0x01000193u;
-		h ^= h >> 15;
-	}
-	return h * 0x9e3779b1u;
+	return rad_hash_floats6(m->rho, m->emit);
 }
 
 static void material_index_put(rad_scene *s, uint32_t id)

@@ -16,6 +16,8 @@
 #ifndef LUXRAD_SCENE_H
 #define LUXRAD_SCENE_H
 
+#include <string.h>
+
 #include "mem.h"
 #include "rad.h"
 #include "vec.h"
@@ -30,6 +32,20 @@ typedef struct rad_material {
 	float rho[3];  /* diffuse reflectance per channel, [0, 1) */
 	float emit[3]; /* exitance per channel, lux (pi x luminance) */
 } rad_material;
+
+/* A hash of six floats by their bits, a[0..2] then b[0..2] (FNV-1a with
+ * a final mix): the merger's edges, the builder's materials. */
+static inline uint32_t rad_hash_floats6(const float a[3], const float b[3])
+{
+	uint32_t h = 0x811c9dc5u;
+	for (int i = 0; i < 6; i++) {
+		uint32_t bits;
+		memcpy(&bits, i < 3 ? a + i : b + i - 3, sizeof(bits));
+		h = (h ^ bits) * 0x01000193u;
+		h ^= h >> 15;
+	}
+	return h * 0x9e3779b1u;
+}
 
 /* Reflectance as stored: values just below 1 must not round up to 1.0f,
  * which would make a lossless surface out of a valid input. */
