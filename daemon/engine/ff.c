@@ -332,32 +332,46 @@ double rad_ff_unoccluded(const rad_patch *r, const rad_patch *s, int nrcv)
 }
 
 /*
- * Fraction of unblocked rays from x to the source points in front of x's
- * tangent plane; when none is, one ray to the clipped polygon's vertex
- * mean (in front, on the source) stands for them.
+ * Visible share of the kernel from x to the source points in front of
+ * x's tangent plane: each ray weighted by the point kernel cos cos / r^2
+ * at its source point.  Not the plain share of rays that pass: occluders
+ * tend to hide the far, grazing part of a source, which carries little
+ * of the kernel, and the plain share counted it as much as the near part
+ * (test_ff: a floor hidden beyond a plate at half height, seen from 1 m
+ * above, read -47 % with 16 rays, +0.3 % weighted).  When no source
+ * point is in front, one ray to the clipped polygon's vertex mean (in
+ * front, on the source) stands for them.
  */
 static double visible_fraction(const rad_vis *vis, v3 x, v3 nx,
                                const rad_patch *s, const v3 *ys, int ny,
                                const v3 *clip, int m, uint64_t *rays)
 {
-	int tried = 0, seen = 0;
+	int tried = 0;
+	double all = 0, seen = 0;
 	for (int j = 0; j < ny; j++) {
-		if (!(v3_dot(v3_sub(ys[j], x), nx) > 0))
+		v3 d = v3_sub(ys[j], x);
+		double cx = v3_dot(d, nx);
+		if (!(cx > 0))
 			continue;
+		double d2 = v3_dot(d, d);
+		double w = cx * fmax(-v3_dot(d, s->n), 0) / (d2 * d2);
 		tried++;
-		seen += rad_vis_segment(vis, x, &nx, ys[j], &s->n);
-	}
-	if (!tried) {
-		v3 c = v3_make(0, 0, 0);
-		for (int i = 0; i < m; i++)
-			c = v3_add(c, clip[i]);
-		tried = 1;
-		seen = rad_vis_segment(vis, x, &nx, v3_madd(x, c, 1.0 / m),
-		                       &s->n);
+		if (!(w > 0))
+			continue;
+		all += w;
+		if (rad_vis_segment(vis, x, &nx, ys[j], &s->n))
+			seen += w;
 	}
 	if (rays)
 		*rays += (uint64_t)tried;
-	return (double)seen / tried;
+	if (all > 0)
+		return seen / all;
+	v3 c = v3_make(0, 0, 0);
+	for (int i = 0; i < m; i++)
+		c = v3_add(c, clip[i]);
+	if (rays)
+		(*rays)++;
+	return rad_vis_segment(vis, x, &nx, v3_madd(x, c, 1.0 / m), &s->n);
 }
 
 /*

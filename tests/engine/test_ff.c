@@ -423,6 +423,35 @@ static void test_vis_occluder_reduces_ff(void **state)
 }
 
 /*
+ * A source half hidden where it is far: a plate at half height hides the
+ * floor beyond x = 1.5 from a point 1 m above the origin, so the point
+ * sees the near part, which carries most of the kernel.  The share of
+ * rays that pass (here 8 of 16) under-counts it; weighted by the point
+ * kernel they must give the visible part's own form factor (exact).
+ */
+static void test_vis_partly_hidden_source_weighted(void **state)
+{
+	(void)state;
+	rad_scene *s = scene_start();
+	add_quad(s, 0, 0, V(-0.5, -0.5, 0), V(4, 0, 0), V(0, 1, 0));
+	add_quad(s, 0, 0, V(-0.01, -0.01, 1), V(0, 0.02, 0), V(0.02, 0, 0));
+	add_quad(s, 0, 0, V(0.75, -2, 0.5), V(4.25, 0, 0), V(0, 4, 0));
+	commit_ok(s);
+	rad_patch src = poly_near(s, V(1.5, 0, 0));
+	rad_patch rcv = poly_near(s, V(0, 0, 1));
+	rad_patch seen = patch(V(-0.5, -0.5, 0), V(2, 0, 0), V(0, 1, 0), 1);
+	double want = rad_ff_point_patch(V(0, 0, 1), V(0, 0, -1), &seen);
+	double whole = rad_ff_point_patch(V(0, 0, 1), V(0, 0, -1), &src);
+	double got = rad_ff_patch_spread(s->vis, &rcv, &src, 4, 16, 0, 0, NULL,
+	                                 NULL);
+	print_message("partly hidden source: F = %.5f, visible part %.5f "
+	              "(%+.2f %%), whole %.5f\n",
+	              got, want, 100 * (got / want - 1), whole);
+	assert_rel(got, want, 0.05);
+	rad_scene_free(s);
+}
+
+/*
  * Every sample point of the receiver under a small occluder 1 mm above it
  * (luminaires under a ceiling, on a grid that lines up with the sample
  * pattern): the rays all fail, yet the receiver sees the source almost
@@ -1095,6 +1124,7 @@ int main(void)
 	        cmocka_unit_test(test_ff_estimate_tracks_exact),
 	        cmocka_unit_test(test_ff_sample_patterns_are_balanced),
 	        cmocka_unit_test(test_vis_occluder_reduces_ff),
+	        cmocka_unit_test(test_vis_partly_hidden_source_weighted),
 	        cmocka_unit_test(test_vis_aliased_zero_rechecked),
 	        cmocka_unit_test(test_vis_no_self_occlusion_at_any_scale),
 	        cmocka_unit_test(test_light_point_inverse_square),
