@@ -23,8 +23,8 @@
  *     (rad_ff_point_patch).  Children are visited nearest first so the
  *     running total grows early.
  *   evaluation: cluster: an emitter of its projected area towards x
- *     (rad_cluster_proj) at the box centre times the visibility of the
- *     centre; inner element: its four
+ *     (rad_cluster_proj) at the box centre times the share of it x sees,
+ *     on rays to a few of its polygons (cluster_seen); inner element: its four
  *     children's radiosity weighted by their own kernels (no extra rays)
  *     times its visible fraction; leaf: B times its visible kernel.
  *   visibility of a piece of source (a leaf, an element taken whole, an
@@ -41,7 +41,7 @@
  * an unsure piece its binomial error c sqrt(p (1 - p) / k) (c its share,
  * p its open fraction, k rays), added linearly (along one shadow edge the
  * errors have one sign); and, added in quadrature as independent errors:
- * a cluster taken as a whole half its share (one ray, projected-area model),
+ * a cluster taken as a whole half its share (few rays, projected-area model),
  * an inner element taken whole the difference its children's weighting
  * made (the next level's correction is of that order), a leaf the
  * difference between its radiosity and its parent's times its visible
@@ -286,8 +286,51 @@ static double box_distance(const rad_cluster *c, v3 x)
 	return sqrt(d2);
 }
 
-/* Cluster: its projected area towards x radiating B from its centre, seen
- * or not along one ray: half its share is the error estimate. */
+/*
+ * The share of a cluster that x sees, on rays to the centroids of up to
+ * CLUSTER_RAYS of its polygons that face x (spread over its polygon
+ * order), each leaving its polygon on the side it shows.  Not to the box
+ * centre: that lies inside a closed object (a book, a board, a cabinet),
+ * whose own faces then block the ray, so a far object taken whole was
+ * dropped (test_blender's SketchUp-like office, with its shelf of 48
+ * books, at --accuracy 0.01 against luxrad-reference: 22 points on its
+ * ceiling and upper walls -3.10 % on average, -2.68 % since).  When none
+ * of the polygons looked at faces x, they are used seen from their
+ * backs.
+ */
+#define CLUSTER_RAYS 4
+#define CLUSTER_LOOKS 16
+static double cluster_seen(const gather *g, const rad_cluster *c)
+{
+	const rad_scene *sc = g->h->scene;
+	uint32_t look = c->count < CLUSTER_LOOKS ? c->count : CLUSTER_LOOKS;
+	v3 y[CLUSTER_RAYS], ny[CLUSTER_RAYS];
+	int n = 0;
+	for (int pass = 0; pass < 2 && n == 0; pass++) {
+		for (uint32_t k = 0; k < look && n < CLUSTER_RAYS; k++) {
+			uint32_t j =
+			        c->first +
+			        (uint32_t)(((uint64_t)k * c->count) / look);
+			const rad_poly *p = &sc->polys[g->h->order[j]];
+			rad_patch pa;
+			rad_patch_from_poly(&pa, p);
+			v3 yc = rad_patch_centroid(&pa);
+			double f = v3_dot(pa.n, v3_sub(g->x, yc));
+			if (pass == 0 && !(f > 0))
+				continue;
+			y[n] = yc;
+			ny[n++] = f > 0 ? pa.n : v3_scale(pa.n, -1);
+		}
+	}
+	int seen = 0;
+	for (int k = 0; k < n; k++)
+		seen += rad_vis_segment(g->vis, g->x, &g->n, y[k], &ny[k]);
+	return n ? (double)seen / n : 0;
+}
+
+/* Cluster: its projected area towards x radiating B from its centre,
+ * times the share of it x sees (cluster_seen); half its share is the
+ * error estimate. */
 static void eval_cluster(gather *g, const rad_cluster *c, double b, v3 ctr,
                          double d)
 {
@@ -298,9 +341,10 @@ static void eval_cluster(gather *g, const rad_cluster *c, double b, v3 ctr,
 	double p = rad_cluster_proj(g->h, c, u.x, u.y, u.z);
 	double share = b * p * rad_cluster_emit(c, 0, p, u.x, u.y, u.z) * cosx /
 	               (M_PI * d * d);
+	if (!(share > 0))
+		return;
 	add_error(g, share / 2);
-	if (rad_vis_segment(g->vis, g->x, &g->n, ctr, NULL))
-		g->total += share;
+	g->total += share * cluster_seen(g, c);
 }
 
 static void gather_cluster(gather *g, uint32_t cid)
