@@ -28,6 +28,7 @@
 
 #include "engine_json.h"
 #include "rad.h"
+#include "rad_reference.h"
 #include "rp.h"
 #include "sceneio.h"
 #include "tool.h"

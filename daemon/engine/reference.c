@@ -77,6 +77,7 @@
 #include "moments.h"
 #include "par.h"
 #include "rad.h"
+#include "rad_reference.h"
 #include "scene.h"
 #include "vis.h"
 

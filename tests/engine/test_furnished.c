@@ -51,6 +51,7 @@
 
 #include "generated.h"
 #include "rad.h"
+#include "rad_reference.h"
 #include "sceneio.h"
 
 #define NX 5

@@ -29,6 +29,7 @@
 #include "photometry.h"
 #include "photometry_data.h"
 #include "rad.h"
+#include "rad_reference.h"
 #include "scene.h"
 
 #define HEIGHT 3.0

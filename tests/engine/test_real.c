@@ -34,6 +34,7 @@
 #include <cmocka.h>
 
 #include "rad.h"
+#include "rad_reference.h"
 #include "sceneio.h"
 
 #define MAXPTS 128

@@ -40,6 +40,7 @@
 #include "closed_forms.h"
 #include "mem.h"
 #include "rad.h"
+#include "rad_reference.h"
 #include "scene.h"
 #include "vis.h"
 

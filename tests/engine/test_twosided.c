@@ -22,6 +22,7 @@
 
 #include "closed_forms.h"
 #include "rad.h"
+#include "rad_reference.h"
 
 #define SHEET_L 1000.0 /* cd/m2 */
 
