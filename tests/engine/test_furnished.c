@@ -84,9 +84,8 @@ static rad_scene *load_office(void)
 	return s;
 }
 
-static void check_solver(const rad_scene *s, rad_solver_kind kind,
-                         const double pts[][6], int n, const double ref[],
-                         const double sd[])
+/* A solver of the given kind at the defaults, 2 threads, converged. */
+static rad_solver *converged_solver(const rad_scene *s, rad_solver_kind kind)
 {
 	rad_options o;
 	rad_options_default(&o);
@@ -96,6 +95,29 @@ static void check_solver(const rad_scene *s, rad_solver_kind kind,
 	rad_error err;
 	assert_int_equal(rad_solver_new(s, &o, &sv, &err), RAD_OK);
 	assert_int_equal(rad_solver_converge(sv, 0, 200, &err), RAD_OK);
+	return sv;
+}
+
+/* luxrad-reference's lux and standard errors at n points (0.4 %). */
+static void reference_lux(const rad_scene *s, const double pts[][6], int n,
+                          double ref[], double sd[])
+{
+	rad_ref_options ro;
+	rad_ref_options_default(&ro);
+	ro.target_error = 0.004;
+	ro.threads = 2;
+	rad_error err;
+	assert_int_equal(rad_reference_illuminance(s, &pts[0][0], (size_t)n,
+	                                           &ro, ref, sd, NULL, &err),
+	                 RAD_OK);
+}
+
+static void check_solver(const rad_scene *s, rad_solver_kind kind,
+                         const double pts[][6], int n, const double ref[],
+                         const double sd[])
+{
+	rad_solver *sv = converged_solver(s, kind);
+	rad_error err;
 	double lux[MAXPTS], el[MAXPTS];
 	assert_true(n <= MAXPTS);
 	assert_int_equal(
@@ -126,15 +148,8 @@ static void check_solver(const rad_scene *s, rad_solver_kind kind,
 static void hold_to_reference(rad_scene *s, const double pts[][6], int n)
 {
 	double ref[MAXPTS], sd[MAXPTS];
-	rad_ref_options ro;
-	rad_ref_options_default(&ro);
-	ro.target_error = 0.004;
-	ro.threads = 2;
-	rad_error err;
 	assert_true(n <= MAXPTS);
-	assert_int_equal(rad_reference_illuminance(s, &pts[0][0], (size_t)n,
-	                                           &ro, ref, sd, NULL, &err),
-	                 RAD_OK);
+	reference_lux(s, pts, n, ref, sd);
 	check_solver(s, RAD_SOLVER_HR, pts, n, ref, sd);
 	check_solver(s, RAD_SOLVER_RMB, pts, n, ref, sd);
 	rad_scene_free(s);
@@ -300,20 +315,9 @@ static void test_far_closed_objects_seen(void **state)
 		p[3] = p[5] = 0;
 		p[4] = -1;
 	}
-	rad_ref_options ro;
-	rad_ref_options_default(&ro);
-	ro.target_error = 0.004;
-	ro.threads = 2;
+	reference_lux(s, (const double(*)[6])pts, 6, ref, sd);
+	rad_solver *sv = converged_solver(s, RAD_SOLVER_HR);
 	rad_error err;
-	assert_int_equal(rad_reference_illuminance(s, &pts[0][0], 6, &ro, ref,
-	                                           sd, NULL, &err),
-	                 RAD_OK);
-	rad_options o;
-	rad_options_default(&o);
-	o.threads = 2;
-	rad_solver *sv = NULL;
-	assert_int_equal(rad_solver_new(s, &o, &sv, &err), RAD_OK);
-	assert_int_equal(rad_solver_converge(sv, 0, 200, &err), RAD_OK);
 	/* A loose gather: far clusters are taken whole. */
 	assert_int_equal(
 	        rad_solver_query(sv, &pts[0][0], 6, 0.3, lux, NULL, &err),
