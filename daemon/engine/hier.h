@@ -207,6 +207,14 @@ static inline rad_link *rad_link_at(const rad_hier *h, uint32_t id)
 
 #define RAD_EXPOSED_ALL 255u
 
+/* Polygon k of m taken evenly along cluster c's range of order[]
+ * (k < m <= c->count): the sample polygons of solvers and queries. */
+static inline uint32_t rad_cluster_pick(const rad_hier *h, const rad_cluster *c,
+                                        uint32_t k, uint32_t m)
+{
+	return h->order[c->first + (uint32_t)(((uint64_t)k * c->count) / m)];
+}
+
 /* The exposed fraction of an element's area (Covered parts). */
 static inline double rad_elem_exposed(const rad_elem *e)
 {

@@ -307,16 +307,15 @@ static int node_points(const rad_hier *h, uint32_t t, int n, int source,
 		const rad_cluster *c = rad_cluster_at(h, t);
 		int m = (uint32_t)n < c->count ? n : (int)c->count, kept = 0;
 		for (int k = 0; k < m; k++) {
-			uint32_t j =
-			        c->first + (uint32_t)(((uint64_t)k * c->count) /
+			uint32_t j = rad_cluster_pick(h, c, (uint32_t)k,
 			                              (uint32_t)m);
 			rad_patch p;
-			rad_patch_from_poly(&p, &h->scene->polys[h->order[j]]);
+			rad_patch_from_poly(&p, &h->scene->polys[j]);
 			pts[kept] = rad_patch_centroid(&p);
 			nrm[kept] = p.n;
 			if (source &&
-			    rad_elem_keep_exposed(h, h->order[j], &pts[kept],
-			                          &nrm[kept], 1, rays) == 0)
+			    rad_elem_keep_exposed(h, j, &pts[kept], &nrm[kept],
+			                          1, rays) == 0)
 				continue;
 			kept++;
 		}

@@ -308,10 +308,8 @@ static double cluster_seen(const gather *g, const rad_cluster *c)
 	int n = 0;
 	for (int pass = 0; pass < 2 && n == 0; pass++) {
 		for (uint32_t k = 0; k < look && n < CLUSTER_RAYS; k++) {
-			uint32_t j =
-			        c->first +
-			        (uint32_t)(((uint64_t)k * c->count) / look);
-			const rad_poly *p = &sc->polys[g->h->order[j]];
+			const rad_poly *p =
+			        &sc->polys[rad_cluster_pick(g->h, c, k, look)];
 			rad_patch pa;
 			rad_patch_from_poly(&pa, p);
 			v3 yc = rad_patch_centroid(&pa);
