@@ -1,7 +1,7 @@
 /*
  * rad_reference.h -- the engine's second public header, beside rad.h:
- * the Monte Carlo estimator, for luxrad-reference and the tests and
- * benchmarks that hold lux to it.
+ * the Monte Carlo estimator, for luxrad-reference and the tests that
+ * hold lux to it.
  */
 #ifndef LUXRAD_RAD_REFERENCE_H
 #define LUXRAD_RAD_REFERENCE_H
