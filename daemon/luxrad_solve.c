@@ -30,6 +30,7 @@
 #include "engine_json.h"
 #include "export.h"
 #include "rad.h"
+#include "rad_reference.h"
 #include "rp.h"
 #include "sceneio.h"
 #include "solve_args.h"
@@ -133,8 +134,72 @@ typedef struct report {
 	const double *lux;       /* one per point */
 	const double *error_lux; /* one per point: estimated |error| */
 	size_t npoints;
-	double query_seconds; /* wall time of the illuminance query */
+	double query_seconds;   /* wall time of the illuminance query */
+	const rad_audit *audit; /* --audit-links, else NULL */
 } report;
+
+/* The audit's classes: receiver <- source, near or not (rad_reference.h). */
+static const char *audit_class_name(int k)
+{
+	static const char *const names[RAD_AUDIT_CLASSES] = {
+	        "surface <- surface",      "surface <- cluster",
+	        "cluster <- surface",      "cluster <- cluster",
+	        "surface <- surface near", "surface <- cluster near",
+	        "cluster <- surface near", "cluster <- cluster near"};
+	return names[k];
+}
+
+static json_t *ej_audit(const rad_audit *au)
+{
+	json_t *o = json_object(), *cls = json_array();
+	for (int k = 0; k < RAD_AUDIT_CLASSES; k++) {
+		const rad_audit_class *c = &au->cls[k];
+		json_t *e = json_object();
+		json_object_set_new(e, "class",
+		                    json_string(audit_class_name(k)));
+		json_object_set_new(e, "links",
+		                    json_integer((json_int_t)c->links));
+		json_object_set_new(e, "stored_form",
+		                    json_real(c->stored_form));
+		json_object_set_new(e, "stored_transfer",
+		                    json_real(c->stored_transfer));
+		json_object_set_new(e, "mc_form", json_real(c->mc_form));
+		json_object_set_new(e, "mc_transfer",
+		                    json_real(c->mc_transfer));
+		json_array_append_new(cls, e);
+	}
+	json_object_set_new(o, "links_total",
+	                    json_integer((json_int_t)au->links_total));
+	json_object_set_new(o, "rays", json_integer((json_int_t)au->rays));
+	json_object_set_new(o, "classes", cls);
+	return o;
+}
+
+static void print_text_audit(const rad_audit *au)
+{
+	unsigned long long n = 0;
+	for (int k = 0; k < RAD_AUDIT_CLASSES; k++)
+		n += au->cls[k].links;
+	printf("\nlinks against Monte Carlo (%llu of %llu links, %llu rays; "
+	       "A F B in lm)\n",
+	       n, (unsigned long long)au->links_total,
+	       (unsigned long long)au->rays);
+	printf("  %-24s %8s %11s %11s %7s %11s %11s %7s\n", "class", "links",
+	       "F stored", "F by MC", "ratio", "moved", "by MC", "ratio");
+	for (int k = 0; k < RAD_AUDIT_CLASSES; k++) {
+		const rad_audit_class *c = &au->cls[k];
+		if (!c->links)
+			continue;
+		printf("  %-24s %8llu %11.5g %11.5g %7.4f %11.5g %11.5g "
+		       "%7.4f\n",
+		       audit_class_name(k), (unsigned long long)c->links,
+		       c->stored_form, c->mc_form,
+		       c->mc_form > 0 ? c->stored_form / c->mc_form : NAN,
+		       c->stored_transfer, c->mc_transfer,
+		       c->mc_transfer > 0 ? c->stored_transfer / c->mc_transfer
+		                          : NAN);
+	}
+}
 
 static int print_json(const report *r)
 {
@@ -162,6 +227,8 @@ static int print_json(const report *r)
 	json_object_set_new(o, "stats", ej_stats(s));
 	json_object_set_new(o, "scene", tool_scene_json(r->scene, r->info));
 	json_object_set_new(o, "per_iteration", its);
+	if (r->audit)
+		json_object_set_new(o, "audit", ej_audit(r->audit));
 
 	int rc =
 	        json_dumpf(o, stdout, JSON_INDENT(2) | JSON_REAL_PRECISION(17));
@@ -257,6 +324,8 @@ static void print_text(const report *r)
 		printf("  (%g %g %g) n (%g %g %g): %.6g +- %.2g\n", p[0], p[1],
 		       p[2], p[3], p[4], p[5], r->lux[i], r->error_lux[i]);
 	}
+	if (r->audit)
+		print_text_audit(r->audit);
 }
 
 /* ------------------------------------------------------------------ main */
@@ -413,6 +482,15 @@ static rad_status query_points(const rad_solver *sv, const point_list *pl,
 	return st;
 }
 
+static rad_status audit_links(rad_solver *sv, uint32_t every, rad_audit *out,
+                              rad_error *err)
+{
+	rad_audit_options o;
+	rad_audit_options_default(&o);
+	o.every = every;
+	return rad_solver_audit_links(sv, &o, out, err);
+}
+
 static int solve_and_report(const cli_args *a, const rad_scene *sc,
                             const sio_info *info, const point_list *pl,
                             double load_seconds)
@@ -423,6 +501,7 @@ static int solve_and_report(const cli_args *a, const rad_scene *sc,
 	rad_scene_counts counts;
 	rad_stats final;
 	sio_export_info xinfo;
+	rad_audit audit;
 	double *lux = calloc(pl->n ? 2 * pl->n : 1, sizeof(double));
 	double *elux = lux + pl->n, tq = 0;
 	int rc = EXIT_SOLVE;
@@ -441,6 +520,9 @@ static int solve_and_report(const cli_args *a, const rad_scene *sc,
 	} else if (pl->n &&
 	           query_points(sv, pl, lux, elux, &tq, &err) != RAD_OK) {
 		rc = engine_error("illuminance query failed", &err);
+	} else if (a->audit_every &&
+	           audit_links(sv, a->audit_every, &audit, &err) != RAD_OK) {
+		rc = engine_error("link audit failed", &err);
 	} else {
 		rad_solver_stats(sv, &final);
 		rad_scene_counts_get(sc, &counts);
@@ -454,7 +536,8 @@ static int solve_and_report(const cli_args *a, const rad_scene *sc,
 		            .lux = lux,
 		            .error_lux = elux,
 		            .npoints = pl->n,
-		            .query_seconds = tq};
+		            .query_seconds = tq,
+		            .audit = a->audit_every ? &audit : NULL};
 		if (a->json) {
 			rc = print_json(&r);
 		} else {

@@ -20,6 +20,7 @@ typedef struct cli_args {
 	tool_luminaires luminaires; /* --luminaire NAME=FILE */
 	rad_options opt;            /* every engine option (rad.h's table) */
 	uint32_t iterations;        /* > 0: exactly this many steps */
+	uint32_t audit_every;       /* > 0: audit one link in this many */
 	int json;                   /* one JSON object on stdout */
 	int per_iteration;          /* a stats line on stderr after each step */
 	int help;

@@ -1,7 +1,8 @@
 /*
  * rad_reference.h -- the engine's second public header, beside rad.h:
  * the Monte Carlo estimator, for luxrad-reference and the tests that
- * hold lux to it.
+ * hold lux to it, and the audit of a solution's links against Monte
+ * Carlo (luxrad-solve --audit-links).
  */
 #ifndef LUXRAD_RAD_REFERENCE_H
 #define LUXRAD_RAD_REFERENCE_H
@@ -55,6 +56,53 @@ rad_status rad_reference_illuminance(const rad_scene *s, const double *pts,
                                      size_t n, const rad_ref_options *o,
                                      double *lux, double *stderr_lux,
                                      uint64_t *samples_used, rad_error *err);
+
+/*
+ * The links of an hr solution held to Monte Carlo (audit.c): every
+ * `every`-th link the solver gathers (lights' excepted), in the order of
+ * the hierarchy, has its transfer estimated again from `samples` random
+ * point pairs and one shadow ray each, with nothing of the solvers' form
+ * factors.  Sums are by class, index 4 near + 2 (receiver is a cluster) +
+ * (source is a cluster); a pair is near when its larger end is larger
+ * than the distance between their centres.  Each sum is of A_r x F x
+ * photopic radiosity (lm):
+ *   stored_form      the link's F, the source's mean radiosity;
+ *   stored_transfer  the same times the cluster emission factor: what the
+ *                    gather moves;
+ *   mc_form          F by Monte Carlo, the source's mean radiosity;
+ *   mc_transfer      by Monte Carlo with the radiosity of the leaf each
+ *                    source sample falls on: what the link should move.
+ * stored_form / mc_form is the form factors' error, stored_transfer /
+ * mc_transfer the link's.  Deterministic for a given seed.  The point
+ * kernel is unbounded where surfaces touch: there the estimate is
+ * unbiased but heavy-tailed (its typical value reads low).
+ */
+#define RAD_AUDIT_CLASSES 8
+typedef struct rad_audit_class {
+	uint64_t links;
+	double stored_form, stored_transfer, mc_form, mc_transfer;
+} rad_audit_class;
+
+typedef struct rad_audit {
+	rad_audit_class cls[RAD_AUDIT_CLASSES];
+	uint64_t links_total; /* gathered links from surfaces and clusters */
+	uint64_t rays;        /* shadow rays traced */
+} rad_audit;
+
+typedef struct rad_audit_options {
+	unsigned every;   /* audit one link in `every` (>= 1) */
+	unsigned samples; /* point pairs per link (>= 1) */
+	uint64_t seed;
+} rad_audit_options;
+
+/* every 10, samples 64, seed 1. */
+void rad_audit_options_default(rad_audit_options *o);
+
+/* Between steps (not while one runs).  RAD_ERR_UNSUPPORTED for any solver
+ * but hr (rmb's link hierarchy is not walked yet); o NULL for the
+ * defaults. */
+rad_status rad_solver_audit_links(rad_solver *sv, const rad_audit_options *o,
+                                  rad_audit *out, rad_error *err);
 
 #ifdef __cplusplus
 }
