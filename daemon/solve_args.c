@@ -59,7 +59,7 @@ static const tool_option tool_options[] = {
          "write the scene's polygons as the solvers see them (corners, "
          "node, reflectance, luminance) to FILE as CSV"},
         {"audit-links", "N", T_U32, ARG(audit_every),
-         "hr: hold one link in N to Monte Carlo after the solve, by "
+         "hr, rmb: hold one link in N to Monte Carlo after the solve, by "
          "class (stored / Monte Carlo transfer)"},
         {"json", NULL, T_FLAG, ARG(json),
          "print one JSON object on stdout instead of the report"},

@@ -1,5 +1,5 @@
 /*
- * audit.c -- the links of an hr solution against Monte Carlo
+ * audit.c -- the links of an hr or rmb solution against Monte Carlo
  * (rad_reference.h).
  *
  * Each audited link's transfer, A_r F(r <- s) times the source's
@@ -22,6 +22,7 @@
 
 #include "hr_nodes.h"
 #include "rad_reference.h"
+#include "rmb.h"
 #include "solver.h"
 #include "vis.h"
 
@@ -178,7 +179,28 @@ typedef struct audit_walk {
 	uint64_t seen;
 } audit_walk;
 
-/* The links node t receives, then those of the nodes below it. */
+/* One gathered link, if it is the one in `every` to audit. */
+static void visit(audit_walk *w, const rad_link *l, uint32_t id)
+{
+	/* Not from a light: its transfer is exact already. */
+	if (!node_is_light(l->src) && w->seen++ % w->o->every == 0)
+		audit_link(w->sv, l, id, w->o, w->cum_r, w->cum_s, w->out);
+}
+
+/* rmb: the leaves of the link hierarchy under link id are what it
+ * gathers (rmb.h). */
+static void walk_tree(audit_walk *w, uint32_t id)
+{
+	const rad_link *l = rad_link_at(&w->sv->h, id);
+	if (l->child == RAD_NONE) {
+		visit(w, l, id);
+		return;
+	}
+	for (uint32_t k = 0; k < l->nchild; k++)
+		walk_tree(w, l->child + k);
+}
+
+/* hr: the links node t receives, then those of the nodes below it. */
 static void walk_links(audit_walk *w, uint32_t t)
 {
 	const rad_hier *h = &w->sv->h;
@@ -186,10 +208,7 @@ static void walk_links(audit_walk *w, uint32_t t)
 	                                   : rad_elem_at(h, t)->links;
 	for (uint32_t id = head; id != RAD_NONE;) {
 		const rad_link *l = rad_link_at(h, id);
-		/* Not from a light: its transfer is exact already. */
-		if (!node_is_light(l->src) && w->seen++ % w->o->every == 0)
-			audit_link(w->sv, l, id, w->o, w->cum_r, w->cum_s,
-			           w->out);
+		visit(w, l, id);
 		id = l->next;
 	}
 	if (node_is_cluster(t)) {
@@ -215,11 +234,9 @@ rad_status rad_solver_audit_links(rad_solver *sv, const rad_audit_options *o,
 		o = &def;
 	}
 	memset(out, 0, sizeof(*out));
-	if (sv->opt.solver != RAD_SOLVER_HR)
+	if (sv->opt.solver != RAD_SOLVER_HR && sv->opt.solver != RAD_SOLVER_RMB)
 		return rad_fail(err, RAD_ERR_UNSUPPORTED,
-		                "audit: only hr's links are audited (matrix "
-		                "and progressive keep none; rmb's link "
-		                "hierarchy is not walked yet)");
+		                "audit: matrix and progressive keep no links");
 	if (o->every < 1 || o->samples < 1)
 		return rad_fail(err, RAD_ERR_INVALID,
 		                "audit: every and samples must be >= 1");
@@ -231,9 +248,15 @@ rad_status rad_solver_audit_links(rad_solver *sv, const rad_audit_options *o,
 	if (!cum)
 		return rad_fail(err, RAD_ERR_NOMEM, "audit: out of memory");
 	audit_walk w = {sv, o, out, cum, cum + np, 0};
-	for (uint32_t i = 0; i < sv->scene->npolys; i++)
-		walk_links(&w, i);
-	walk_links(&w, 0 | RAD_TAG_CLUSTER);
+	if (sv->opt.solver == RAD_SOLVER_RMB) {
+		const rmb_state *st = sv->impl;
+		for (size_t i = 0; i < st->nroots; i++)
+			walk_tree(&w, st->roots[i]);
+	} else {
+		for (uint32_t i = 0; i < sv->scene->npolys; i++)
+			walk_links(&w, i);
+		walk_links(&w, 0 | RAD_TAG_CLUSTER);
+	}
 	out->links_total = w.seen;
 	rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, cum);
 	return RAD_OK;

@@ -58,8 +58,9 @@ rad_status rad_reference_illuminance(const rad_scene *s, const double *pts,
                                      uint64_t *samples_used, rad_error *err);
 
 /*
- * The links of an hr solution held to Monte Carlo (audit.c): every
- * `every`-th link the solver gathers (lights' excepted), in the order of
+ * The links of an hr or rmb solution held to Monte Carlo (audit.c): every
+ * `every`-th link the solver gathers (lights' excepted; rmb's active
+ * ones, the leaves of its link hierarchy), in the order of
  * the hierarchy, has its transfer estimated again from `samples` random
  * point pairs and one shadow ray each, with nothing of the solvers' form
  * factors.  Sums are by class, index 4 near + 2 (receiver is a cluster) +
@@ -98,9 +99,11 @@ typedef struct rad_audit_options {
 /* every 10, samples 64, seed 1. */
 void rad_audit_options_default(rad_audit_options *o);
 
-/* Between steps (not while one runs).  RAD_ERR_UNSUPPORTED for any solver
- * but hr (rmb's link hierarchy is not walked yet); o NULL for the
- * defaults. */
+/* Between steps (not while one runs).  RAD_ERR_UNSUPPORTED for matrix and
+ * progressive, which keep no links; o NULL for the defaults.  For rmb,
+ * the links are those of its last iteration (they coarsen as dB shrinks)
+ * and the radiosity is B, not the dB it gathers: the audit is of their
+ * form factors and of how a link averages its source. */
 rad_status rad_solver_audit_links(rad_solver *sv, const rad_audit_options *o,
                                   rad_audit *out, rad_error *err);
 
