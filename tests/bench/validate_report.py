@@ -256,6 +256,50 @@ plot %s, 2 with lines dt 2 lc 8 title 'target, defaults (2 %%)'
     gnuplot(out, script, "summary")
 
 
+AUDIT_CLASSES = ["s <- s", "s <- c", "c <- s", "c <- c", "s <- s near",
+                 "s <- c near", "c <- s near", "c <- c near"]
+
+
+def audit_table(out, names):
+    """The link audit of each scene's hr solve at the defaults (its
+    runs/NAME.audit.json): per class, what the links move over what Monte
+    Carlo says they should, with the class's share of the Monte Carlo
+    transfer in brackets; *all* is the ratio over every audited link."""
+    md = ["## Link audit (hr, defaults)", "",
+          "`luxrad-solve SCENE --audit-links 10`: one link in 10 held to "
+          "Monte Carlo (64 point pairs and shadow rays each).  Per class "
+          "(s: surface, c: cluster, receiver <- source; near: the larger "
+          "end is larger than the distance between the centres), what the "
+          "links move over what they should move (A F B, by Monte Carlo "
+          "with each sample's own radiosity), and in brackets the class's "
+          "share of that transfer.  Below 1 the solve loses light there, "
+          "above 1 it makes some.", "",
+          "| scene | " + " | ".join(AUDIT_CLASSES) + " | all |",
+          "|---" * (len(AUDIT_CLASSES) + 2) + "|"]
+    rows = 0
+    for name in names:
+        j = load_json(os.path.join(out, "runs", name + ".audit.json"))
+        if not j or "audit" not in j:
+            continue
+        cls = j["audit"]["classes"]
+        total = sum(c["mc_transfer"] for c in cls)
+        cells, moved, should = [], 0.0, 0.0
+        for c in cls:
+            if c["links"] == 0 or c["mc_transfer"] <= 0 or total <= 0:
+                cells.append("–")
+                continue
+            moved += c["stored_transfer"]
+            should += c["mc_transfer"]
+            cells.append("%.2f (%.0f %%)" % (
+                c["stored_transfer"] / c["mc_transfer"],
+                100 * c["mc_transfer"] / total))
+        md.append("| %s | %s | %s |" % (
+            name, " | ".join(cells),
+            "%.3f" % (moved / should) if should > 0 else "–"))
+        rows += 1
+    return md + [""] if rows else []
+
+
 def main():
     out, table = sys.argv[1], sys.argv[2]
     scenes = [l.split("|") for l in table.splitlines() if l.strip()]
@@ -323,6 +367,7 @@ def main():
         if r_png:
             md += ["![%s](%s)" % (name, r_png), ""]
     summary(out, md, allruns, [sc[0] for sc in scenes])
+    md += audit_table(out, [sc[0] for sc in scenes])
     with open(os.path.join(out, "runs.csv"), "w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["scene", "solver", "accuracy", "status", "worst_pct",
