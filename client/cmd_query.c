@@ -206,12 +206,18 @@ static void print_grid(const json_t *reply)
 		for (long long i = 0; i < nu; i++) {
 			size_t k = (size_t)(j * nu + i);
 			json_t *p = json_array_get(pts, k);
-			printf("%lld,%lld,%.9g,%.9g,%.9g,%.6g,%.2g\n", i, j,
+			json_t *l = json_array_get(lux, k);
+			printf("%lld,%lld,%.9g,%.9g,%.9g,", i, j,
 			       json_number_value(json_array_get(p, 0)),
 			       json_number_value(json_array_get(p, 1)),
-			       json_number_value(json_array_get(p, 2)),
-			       json_number_value(json_array_get(lux, k)),
-			       json_number_value(json_array_get(elux, k)));
+			       json_number_value(json_array_get(p, 2)));
+			/* A point inside a closed object: empty fields. */
+			if (json_is_number(l))
+				printf("%.6g,%.2g\n", json_number_value(l),
+				       json_number_value(
+				               json_array_get(elux, k)));
+			else
+				printf(",\n");
 		}
 	}
 	if (json_is_number(json_object_get(reply, "u0")))
@@ -223,6 +229,9 @@ static void print_grid(const json_t *reply)
 	        lx_jdbl(reply, "max"), u0);
 	fprintf(stderr, "largest error estimate %.2g lux ",
 	        lx_jdbl(reply, "error_max"));
+	if (lx_jint(reply, "inside") > 0)
+		fprintf(stderr, "(%lld points inside objects left out) ",
+		        lx_jint(reply, "inside"));
 	fprintf(stderr, "(iteration %lld)\n", lx_jint(reply, "iteration"));
 }
 

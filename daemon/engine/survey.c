@@ -24,11 +24,24 @@
  * horizontal face (|ny| >= HORIZ_NY) has u = +x and v = +z whatever its
  * side, the plan view looking down -y, so floors, ceilings and work
  * planes share one orientation; a wall has v = -y (upright).
+ *
+ * A point of a work plane can fall inside furniture (a cabinet taller
+ * than the plane): no light reaches it, and counted, it sets Emin to 0.
+ * It is inside a closed object when, of the rays along its normal and
+ * along four directions across it, at least three meet the backs of
+ * surfaces first (rad_vis_first_hit_front, which shows a two-sided face
+ * its front).  Not all: furniture stands on the floor and objects touch
+ * (books on a shelf), and where a face coincides with another's front
+ * the ray meets that front.  Under a desk (its underside, or a one-sided
+ * top seen from below), the rays across meet the room's walls; in the
+ * open they meet nothing: neither is inside.  A point outside the room
+ * sees the walls' backs: it receives nothing either, and is left out too.
  */
 #include <math.h>
 #include <string.h>
 
 #include "scene.h"
+#include "vis.h"
 
 #define FACE_COS 0.999 /* normals this close belong to one face */
 #define HORIZ_NY 0.7   /* |ny| at least this: a horizontal face */
@@ -239,6 +252,51 @@ rad_status rad_scene_face_sample(const rad_scene *s, uint32_t node,
 		if (node_poly(s, node, i) &&
 		    v3_dot(v3_f(p->n), nrm) >= FACE_COS)
 			*non += sample_poly(p, f, nu, nv, pts, on);
+	}
+	return RAD_OK;
+}
+
+/* 1 if the first surface the ray from x along unit d meets shows its
+ * back. */
+static int meets_back(const rad_vis *v, v3 x, v3 d)
+{
+	double t;
+	int front = 0;
+	uint32_t hit = rad_vis_first_hit_front(v, x, d, rad_vis_eps(v), 1e30,
+	                                       &t, &front);
+	return hit != UINT32_MAX && !front;
+}
+
+rad_status rad_scene_points_inside(const rad_scene *s, const double *pts,
+                                   size_t n, unsigned char *inside,
+                                   rad_error *err)
+{
+	if (!s->committed || !s->vis)
+		return rad_fail(err, RAD_ERR_STATE,
+		                "points inside: the scene is not committed");
+	for (size_t i = 0; i < n; i++) {
+		const double *p = pts + 6 * i;
+		v3 x = v3_make(p[0], p[1], p[2]);
+		v3 d = v3_make(p[3], p[4], p[5]);
+		double len = v3_len(d);
+		inside[i] = 0;
+		if (!isfinite(p[0] + p[1] + p[2]) || !(len > 0) ||
+		    !isfinite(len))
+			continue;
+		d = v3_scale(d, 1 / len);
+		/* Across: t1 off the axis least along d, t2 = d x t1. */
+		v3 a = fabs(d.x) < fabs(d.y)
+		               ? (fabs(d.x) < fabs(d.z) ? v3_make(1, 0, 0)
+		                                        : v3_make(0, 0, 1))
+		               : (fabs(d.y) < fabs(d.z) ? v3_make(0, 1, 0)
+		                                        : v3_make(0, 0, 1));
+		v3 t1 = v3_norm(v3_cross(d, a)), t2 = v3_cross(d, t1);
+		const v3 dirs[5] = {d, t1, v3_scale(t1, -1), t2,
+		                    v3_scale(t2, -1)};
+		int backs = 0;
+		for (int k = 0; k < 5; k++)
+			backs += meets_back(s->vis, x, dirs[k]);
+		inside[i] = backs >= 3;
 	}
 	return RAD_OK;
 }

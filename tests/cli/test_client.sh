@@ -303,21 +303,26 @@ expect_exit "query --grid" 0 "grid "
 cp "$TMP/out" "$TMP/grid.csv"
 run query "$JOB" --grid --origin 0,0.001,0 --u 0.556,0,0 --v 0,0,0.5592 --json
 cp "$TMP/out" "$TMP/grid.json"
-check_py "grid: nu x nv rows, EN 12464-1 spacing, points inside the rectangle" '
+check_py "grid: nu x nv rows, EN 12464-1 spacing, points inside the rectangle, those inside the blocks left out" '
 import csv, json, math, sys
 r = json.load(open(sys.argv[1]))
 rows = list(csv.reader(open(sys.argv[2])))
 assert rows[0] == ["i","j","x","y","z","lux","error_lux"], rows[0]
 nu, nv = r["nu"], r["nv"]
 assert len(rows) - 1 == nu * nv == len(r["lux"]) == len(r["error_lux"]), (len(rows), nu, nv)
-assert r["error_max"] == max(r["error_lux"]) and r["error_max"] < r["max"], r
+# 1 mm above the floor, the two blocks stand on: their cells are inside.
+out = [i for i, v in enumerate(r["lux"]) if v is None]
+assert r["inside"] == len(out) > 0, (r["inside"], out)
+assert all(r["error_lux"][i] is None and rows[1 + i][5:] == ["", ""] for i in out), out
+lux = [v for v in r["lux"] if v is not None]
+assert r["error_max"] == max(e for e in r["error_lux"] if e is not None) and r["error_max"] < r["max"], r
 p = 0.2 * 5 ** math.log10(0.5592)
 assert abs(r["spacing"] - p) < 1e-6, r["spacing"]
 assert nu == math.ceil(0.556 / p) and nv == math.ceil(0.5592 / p), (nu, nv)
 for row in rows[1:]:
     x, z = float(row[2]), float(row[4])
     assert 0 < x < 0.556 and 0 < z < 0.5592, row
-assert abs(r["min"] - min(r["lux"])) < 1e-9 and r["max"] >= r["mean"] >= r["min"], r
+assert abs(r["min"] - min(lux)) < 1e-9 and r["max"] >= r["mean"] >= r["min"] > 0, r
 ' "$TMP/grid.json" "$TMP/grid.csv"
 
 run query "$JOB" --surfaces

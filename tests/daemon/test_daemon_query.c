@@ -9,7 +9,8 @@
  *    deterministic), for hr, rmb and progressive, converged or stepped;
  *  - query.grid: cell centres, nu = ceil(|u|/p), the EN 12464-1 default
  *    spacing 0.2 * 5^log10(d) capped at 10 m, min <= mean <= max, u0 =
- *    min/mean, values equal query.points at the returned points;
+ *    min/mean, values equal query.points at the returned points; the
+ *    points inside a closed object (the office desk's top) left out;
  *  - query.surfaces: one entry per mesh node, named as in the file,
  *    min <= mean <= max, the office floor's area, a flat floor's bounds;
  *  - query.node: the floor one face facing up, the walls four vertical
@@ -533,6 +534,46 @@ static void test_query_grid_cells_spacing_and_uniformity(void **state)
 	dm_pass();
 }
 
+/* A grid through the office desk's top, a closed slab 0.72 .. 0.75 m over
+ * x 1.3 .. 2.7, z 2.05 .. 2.75: its 3 x 6 cells inside the slab receive
+ * nothing and are left out (null, counted in "inside"); the rest hold
+ * min, mean and max, min well above 0. */
+static void test_query_grid_leaves_out_inside_objects(void **state)
+{
+	(void)state;
+	dm_daemon *d = dm_start(NULL);
+	dm_conn *c = dm_open(d, NULL);
+	json_t *sc;
+	json_t *job = dm_solve_sample(c, "office.gltf", &sc);
+	json_t *r = dm_ok(c, "{s:s, s:O, s:[f,f,f], s:[f,f,f], s:[f,f,f], s:f}",
+	                  "cmd", "query.grid", "job", job, "origin", 0.0, 0.735,
+	                  3.0, "u", 4.0, 0.0, 0.0, "v", 0.0, 0.0, -3.0,
+	                  "spacing", 0.25);
+	assert_int_equal(dm_int(r, "nu"), 16);
+	assert_int_equal(dm_int(r, "nv"), 12);
+	assert_int_equal(dm_int(r, "inside"), 18);
+	json_t *lux = dm_get(r, "lux"), *el = dm_get(r, "error_lux");
+	double mn = HUGE_VAL;
+	for (int j = 0; j < 12; j++) {
+		for (int i = 0; i < 16; i++) {
+			double x = 0.125 + 0.25 * i, z = 2.875 - 0.25 * j;
+			int in = x > 1.3 && x < 2.7 && z > 2.05 && z < 2.75;
+			json_t *v = json_array_get(lux, (size_t)(j * 16 + i));
+			json_t *e = json_array_get(el, (size_t)(j * 16 + i));
+			assert_int_equal(json_is_null(v), in);
+			assert_int_equal(json_is_null(e), in);
+			if (!in)
+				mn = fmin(mn, json_number_value(v));
+		}
+	}
+	assert_true(dm_close_enough(dm_num(r, "min"), mn, 1e-12));
+	assert_true(mn > 1);
+	json_decref(r);
+	json_decref(job);
+	json_decref(sc);
+	dm_pass();
+}
+
 /* ----------------------------------------------------------- surfaces */
 
 static void test_query_surfaces_per_node(void **state)
@@ -791,6 +832,7 @@ int main(void)
 	        T(test_split_query_equals_small_queries),
 	        T(test_pipelined_requests_are_answered_in_order),
 	        T(test_query_grid_cells_spacing_and_uniformity),
+	        T(test_query_grid_leaves_out_inside_objects),
 	        T(test_query_surfaces_per_node),
 	        T(test_query_node_faces_and_luminaires),
 #undef T

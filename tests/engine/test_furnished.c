@@ -404,6 +404,38 @@ static void test_audit_links(void **state)
 	rad_scene_free(s);
 }
 
+/*
+ * Points inside closed objects (rad_scene_points_inside): the centre of a
+ * cube, whatever the normal, is inside; beside the cubes, above them
+ * (looking up into the open or down onto a cube's top) and a NaN point
+ * are not.
+ */
+static void test_points_inside(void **state)
+{
+	(void)state;
+	rad_scene *s = cubes_on_black_floor();
+	const double pts[][6] = {
+	        {0.8, 0.05, 0.8, 0, 1, 0},  {0.8, 0.05, 0.8, 1, 0, 0},
+	        {0.8, 0.05, 0.8, 0, 0, -1}, {1.0, 0.05, 0.8, 0, 1, 0},
+	        {0.8, 0.5, 0.8, 0, 1, 0},   {0.8, 0.5, 0.8, 0, -1, 0},
+	        {NAN, 0.05, 0.8, 0, 1, 0},  {0.8, 0.05, 0.8, 0, 0, 0},
+	};
+	const unsigned char want[] = {1, 1, 1, 0, 0, 0, 0, 0};
+	size_t n = sizeof(want);
+	unsigned char in[sizeof(want)];
+	rad_error err;
+	assert_int_equal(rad_scene_points_inside(s, &pts[0][0], n, in, &err),
+	                 RAD_OK);
+	for (size_t i = 0; i < n; i++)
+		assert_int_equal(in[i], want[i]);
+	rad_scene_free(s);
+	rad_scene *open = NULL;
+	assert_int_equal(rad_scene_new(&open, &err), RAD_OK);
+	assert_int_equal(rad_scene_points_inside(open, &pts[0][0], 1, in, &err),
+	                 RAD_ERR_STATE);
+	rad_scene_free(open);
+}
+
 static rad_scene *luminaire_half_covered(void)
 {
 	rad_error err;
@@ -496,6 +528,7 @@ int main(void)
 	        cmocka_unit_test(test_bulb_written_twice),
 	        cmocka_unit_test(test_far_closed_objects_seen),
 	        cmocka_unit_test(test_audit_links),
+	        cmocka_unit_test(test_points_inside),
 	        cmocka_unit_test(test_luminaire_half_covered),
 	        cmocka_unit_test(test_slab_room),
 	};

@@ -759,6 +759,12 @@ rad_status rad_scene_face_sample(const rad_scene *s, uint32_t node,
                                  unsigned char *on, size_t *non,
                                  rad_error *err);
 
+/* inside[i] = 1 where point i (as rad_solver_query) lies within a closed
+ * object (survey.c); after commit. */
+rad_status rad_scene_points_inside(const rad_scene *s, const double *pts,
+                                   size_t n, unsigned char *inside,
+                                   rad_error *err);
+
 /* Light i (0 <= i < counts.lights), its name borrowed from the scene. */
 rad_status rad_scene_light_get(const rad_scene *s, uint32_t i,
                                rad_light_desc *out, rad_error *err);

@@ -101,29 +101,66 @@ static json_t *run_points(cmd_server *d, query_task *q, double *lux,
 	return reply;
 }
 
+/* The values of the points not left out (skip[i] 0), null for the
+ * others. */
+static json_t *kept_json(const double *v, const unsigned char *skip, size_t n)
+{
+	json_t *arr = json_array();
+	for (size_t i = 0; i < n; i++)
+		json_array_append_new(arr,
+		                      skip[i] ? json_null() : ej_real(v[i]));
+	return arr;
+}
+
+/*
+ * query.grid.  A point inside a closed object (a work plane through a
+ * cabinet: rad_scene_points_inside) is left out: null in lux and
+ * error_lux, not in min, mean, max or u0, counted in "inside".  No light
+ * reaches it, and counted it made Emin 0 in every furnished room.
+ */
 static json_t *run_grid(cmd_server *d, query_task *q, double *lux,
                         rad_error *err)
 {
-	json_t *reply = gather_lux(d, q, lux, err);
-	if (!reply)
+	unsigned char *skip = calloc(q->n ? q->n : 1, 1);
+	if (!skip) {
+		q->fail = RP_ERR_NOMEM;
+		snprintf(err->msg, sizeof(err->msg), "out of memory");
 		return NULL;
+	}
+	if (rad_scene_points_inside(q->sol->scene->scene, q->pts, q->n, skip,
+	                            err) != RAD_OK) {
+		free(skip);
+		return NULL;
+	}
+	json_t *reply = gather_lux(d, q, lux, err);
+	if (!reply) {
+		free(skip);
+		return NULL;
+	}
 	double mn = HUGE_VAL, mx = -HUGE_VAL, sum = 0, emax = 0;
+	size_t kept = 0;
 	for (size_t i = 0; i < q->n; i++) {
+		if (skip[i])
+			continue;
 		emax = lux[q->n + i] > emax ? lux[q->n + i] : emax;
 		mn = lux[i] < mn ? lux[i] : mn;
 		mx = lux[i] > mx ? lux[i] : mx;
 		sum += lux[i];
+		kept++;
 	}
-	double mean = sum / (double)q->n;
+	double mean = kept ? sum / (double)kept : 0;
 	json_object_set_new(reply, "nu", json_integer(q->nu));
 	json_object_set_new(reply, "nv", json_integer(q->nv));
 	json_object_set_new(reply, "spacing", ej_real(q->spacing));
-	json_object_set_new(reply, "lux", values_json(lux, q->n));
-	json_object_set_new(reply, "error_lux", values_json(lux + q->n, q->n));
+	json_object_set_new(reply, "inside",
+	                    json_integer((json_int_t)(q->n - kept)));
+	json_object_set_new(reply, "lux", kept_json(lux, skip, q->n));
+	json_object_set_new(reply, "error_lux",
+	                    kept_json(lux + q->n, skip, q->n));
 	json_object_set_new(reply, "error_max", ej_real(emax));
-	json_object_set_new(reply, "min", ej_real(mn));
-	json_object_set_new(reply, "mean", ej_real(mean));
-	json_object_set_new(reply, "max", ej_real(mx));
+	json_object_set_new(reply, "min", kept ? ej_real(mn) : json_null());
+	json_object_set_new(reply, "mean", kept ? ej_real(mean) : json_null());
+	json_object_set_new(reply, "max", kept ? ej_real(mx) : json_null());
 	json_object_set_new(reply, "u0",
 	                    mean > 0 ? ej_real(mn / mean) : json_null());
 	if (q->want_points) {
@@ -135,6 +172,7 @@ static json_t *run_grid(cmd_server *d, query_task *q, double *lux,
 		}
 		json_object_set_new(reply, "points", pa);
 	}
+	free(skip);
 	return reply;
 }
 
