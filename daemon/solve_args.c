@@ -258,6 +258,12 @@ static int check_combination(const cli_args *a, char *msg, size_t len)
 		        "--iterations runs a fixed number of steps; it "
 		        "cannot be combined with %s",
 		        tol ? "--tol" : "--max-iterations");
+	if (a->audit_every && a->opt.solver != RAD_SOLVER_HR &&
+	    a->opt.solver != RAD_SOLVER_RMB)
+		return rp_cli_fail(msg, len,
+		                   "--audit-links holds links to Monte Carlo: "
+		                   "--solver %s keeps none (hr or rmb do)",
+		                   rad_solver_kind_name(a->opt.solver));
 	if (!a->scene_path)
 		return rp_cli_fail(msg, len, "no scene file given");
 	return EXIT_OKAY;

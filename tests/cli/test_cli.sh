@@ -33,7 +33,8 @@ test_help() {
 	run --help
 	expect_exit "--help exits 0" 0
 	# The engine's options (rad.h's table) are checked by test_options.
-	for opt in solver iterations points export json per-iteration help; do
+	for opt in solver iterations points export json per-iteration \
+		audit-links help; do
 		grep -qF -- "--$opt" "$TMP/out" || missing="$missing --$opt"
 	done
 	for word in metres lux cd/m2 "Exit status"; do
@@ -63,6 +64,9 @@ test_usage_errors() {
 	expect_exit "unknown solver exits 2" 2 "simplex"
 	run "$SCENE" --iterations 2 --tol 1e-3
 	expect_exit "--iterations with --tol exits 2" 2 "--tol"
+	run "$SCENE" --solver matrix --audit-links 4
+	expect_exit "--audit-links with a solver that keeps no links exits 2" 2 \
+		"keeps none"
 	run "$SCENE" --eps
 	expect_exit "missing option value exits 2" 2 "--eps"
 	run "$SCENE" --accuracy 0
@@ -235,6 +239,27 @@ EOF
 	fi
 }
 
+# The link audit: every class present in the JSON, the links audited one
+# in N of those counted, and on the Cornell box (pairs of surfaces whose
+# form factors are exact at their points) stored and Monte Carlo within 5 %.
+test_audit() {
+	run "$SCENE" --json --threads 1 --audit-links 3
+	if [[ $RC -eq 0 ]] && "$PY" - "$TMP/out" >"$TMP/err" 2>&1 <<'EOF'; then
+import json, sys
+a = json.load(open(sys.argv[1]))["audit"]
+c = a["classes"]
+assert len(c) == 8 and c[0]["class"] == "surface <- surface", c
+n = sum(x["links"] for x in c)
+assert n == (a["links_total"] + 2) // 3 and a["rays"] > 0, (n, a)
+s = c[0]
+assert s["links"] > 0 and abs(s["stored_form"] / s["mc_form"] - 1) < 0.05, s
+EOF
+		pass "--audit-links: classes, one link in 3, surfaces within 5 %"
+	else
+		fail "--audit-links (exit $RC): $(cat "$TMP/err")"
+	fi
+}
+
 test_solve_text() {
 	run "$SCENE" --iterations 1 --eps "$EPS" --points "$TMP/good.pts"
 	if [[ $RC -eq 0 ]] && grep -q 'illuminance (lux, +- estimated error' "$TMP/out" &&
@@ -252,5 +277,6 @@ test_file_errors
 test_solve_json
 test_glb
 test_solve_text
+test_audit
 echo "$PASSES passed, $FAILS failed"
 [[ $FAILS -eq 0 ]]
