@@ -203,9 +203,11 @@ static int query_plane(report *r)
 	json_object_set_new(r->plane, "ud",
 	                    mx > 0 ? json_real(mn / mx) : json_null());
 	json_object_set_new(r->plane, "area", json_real(u[0] * v[2]));
-	json_object_set_new(r->plane, "points",
-	                    json_integer(lx_jint(r->plane, "nu") *
-	                                 lx_jint(r->plane, "nv")));
+	/* Points inside closed objects are left out (query.grid). */
+	json_object_set_new(
+	        r->plane, "points",
+	        json_integer(lx_jint(r->plane, "nu") * lx_jint(r->plane, "nv") -
+	                     lx_jint(r->plane, "inside")));
 	return 0;
 }
 
@@ -307,8 +309,12 @@ static void surfaces_table(FILE *f, const report *r)
 	      "<th>U<sub>d</sub></th><th>Largest error (lux)</th></tr>\n",
 	      f);
 	if (r->plane) {
-		fprintf(f, "<tr><td>Work plane, %.3g m</td><td class=\"n\">",
-		        r->height_m);
+		long long in = lx_jint(r->plane, "inside");
+		fprintf(f, "<tr><td>Work plane, %.3g m", r->height_m);
+		if (in > 0)
+			fprintf(f, " (%lld point%s inside objects left out)",
+			        in, in == 1 ? "" : "s");
+		fputs("</td><td class=\"n\">", f);
 		lx_html_num(f, r->plane, "area", "%.4g");
 		fputs("</td>", f);
 		stats_cells(f, r->plane);

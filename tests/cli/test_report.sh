@@ -176,5 +176,7 @@ run report "$JOB" -o "$R" --surface floor --surface "<b>&\"wall'" \
 expect_exit "report --surface twice" 0
 has "two surfaces" "$TMP/out" "work plane and 2 surfaces"
 has "the plane where asked" "$R" "Work plane, 0.1 m"
+# At 0.1 m the plane runs through both blocks: their points are left out.
+has "the blocks' points left out" "$R" "inside objects left out)"
 lacks "no ceiling" "$R" "<td>ceiling</td>"
 finish
