@@ -34,8 +34,9 @@
  * (books on a shelf), and where a face coincides with another's front
  * the ray meets that front.  Under a desk (its underside, or a one-sided
  * top seen from below), the rays across meet the room's walls; in the
- * open they meet nothing: neither is inside.  A point outside the room
- * sees the walls' backs: it receives nothing either, and is left out too.
+ * open they meet nothing: neither is inside.  A point beyond the room's
+ * walls (a rectangle larger than an L-shaped room) is left out too where
+ * three of its rays meet walls from behind.
  */
 #include <math.h>
 #include <string.h>
