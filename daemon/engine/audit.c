@@ -17,31 +17,18 @@
  * result depends on neither threads nor call order.
  */
 #include <math.h>
-#include <stdlib.h>
 #include <string.h>
 
 #include "hr_nodes.h"
 #include "rad_reference.h"
 #include "rmb.h"
+#include "rng.h"
 #include "solver.h"
 #include "vis.h"
 
-static uint64_t mix64(uint64_t z)
-{
-	z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-	z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-	return z ^ (z >> 31);
-}
-
-static double uniform(uint64_t *s)
-{
-	*s += 0x9E3779B97F4A7C15ull;
-	return (double)(mix64(*s) >> 11) * (1.0 / 9007199254740992.0);
-}
-
 static v3 patch_point(const rad_patch *p, uint64_t *s)
 {
-	double a = uniform(s), b = uniform(s);
+	double a = rad_uniform(s), b = rad_uniform(s);
 	if (!p->quad && a + b > 1) {
 		a = 1 - a;
 		b = 1 - b;
@@ -56,7 +43,7 @@ static void leaf_patch(const rad_hier *h, uint32_t id, uint64_t *s,
 {
 	const rad_elem *e = rad_elem_at(h, id);
 	while (e->child != RAD_NONE) {
-		uint32_t k = (uint32_t)(uniform(s) * 4);
+		uint32_t k = (uint32_t)(rad_uniform(s) * 4);
 		id = e->child + (k > 3 ? 3 : k);
 		e = rad_elem_at(h, id);
 	}
@@ -68,7 +55,7 @@ static void leaf_patch(const rad_hier *h, uint32_t id, uint64_t *s,
 static uint32_t cluster_poly(const rad_hier *h, const rad_cluster *c,
                              const double *cum, uint64_t *s)
 {
-	double t = uniform(s) * cum[c->count];
+	double t = rad_uniform(s) * cum[c->count];
 	uint32_t lo = 0, hi = c->count - 1;
 	while (lo < hi) {
 		uint32_t mid = lo + (hi - lo + 1) / 2;
@@ -136,7 +123,7 @@ static void audit_link(const rad_solver *sv, const rad_link *l, uint32_t id,
 		cluster_cum(h, rad_cluster_at(h, r), cum_r);
 	if (node_is_cluster(s))
 		cluster_cum(h, rad_cluster_at(h, s), cum_s);
-	uint64_t st = mix64(o->seed ^ mix64(id));
+	uint64_t st = rad_mix64(o->seed ^ rad_mix64(id));
 	double form = 0, transfer = 0;
 	for (unsigned i = 0; i < o->samples; i++) {
 		v3 nx, ny;

@@ -78,6 +78,7 @@
 #include "par.h"
 #include "rad.h"
 #include "rad_reference.h"
+#include "rng.h"
 #include "scene.h"
 #include "vis.h"
 
@@ -93,16 +94,6 @@
 
 /* --------------------------------------------------------------- random */
 
-/* splitmix64's finaliser: a bijective 64-bit mix. */
-static uint64_t mix64(uint64_t z)
-{
-	z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-	z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-	return z ^ (z >> 31);
-}
-
-#define GOLDEN 0x9E3779B97F4A7C15ull
-
 typedef struct rng {
 	uint64_t state;
 } rng;
@@ -110,9 +101,9 @@ typedef struct rng {
 /* The stream of path `path` of point `point`. */
 static rng rng_key(uint64_t seed, uint64_t point, uint64_t path)
 {
-	uint64_t k = mix64(seed + GOLDEN);
-	k = mix64(k ^ (point * 0xD1B54A32D192ED03ull));
-	k = mix64(k ^ (path * 0x8CB92BA72F3D8DD7ull));
+	uint64_t k = rad_mix64(seed + RAD_GOLDEN);
+	k = rad_mix64(k ^ (point * 0xD1B54A32D192ED03ull));
+	k = rad_mix64(k ^ (path * 0x8CB92BA72F3D8DD7ull));
 	rng r = {k};
 	return r;
 }
@@ -120,8 +111,7 @@ static rng rng_key(uint64_t seed, uint64_t point, uint64_t path)
 /* Uniform in [0, 1), 53 bits. */
 static double rng_next(rng *r)
 {
-	r->state += GOLDEN;
-	return (double)(mix64(r->state) >> 11) * 0x1.0p-53;
+	return rad_uniform(&r->state);
 }
 
 /* ---------------------------------------------------------------- scene */
