@@ -19,6 +19,7 @@
 #include <math.h>
 #include <string.h>
 
+#include "hr.h"
 #include "hr_nodes.h"
 #include "rad_reference.h"
 #include "rmb.h"
@@ -91,21 +92,6 @@ static v3 node_sample(const rad_hier *h, uint32_t t, const double *cum,
 	return patch_point(&p, s);
 }
 
-static v3 node_mid(const rad_hier *h, uint32_t t, double *size)
-{
-	*size = node_size(h, t);
-	if (node_is_cluster(t)) {
-		const rad_cluster *c = rad_cluster_at(h, t);
-		return v3_make(0.5 * ((double)c->lo[0] + c->hi[0]),
-		               0.5 * ((double)c->lo[1] + c->hi[1]),
-		               0.5 * ((double)c->lo[2] + c->hi[2]));
-	}
-	const rad_elem *e = rad_elem_at(h, t);
-	rad_patch p;
-	rad_patch_from_floats(&p, e->p0, e->e1, e->e2, e->quad);
-	return rad_patch_centroid(&p);
-}
-
 /* One link: its sums into its class. */
 static void audit_link(const rad_solver *sv, const rad_link *l, uint32_t id,
                        const rad_audit_options *o, double *cum_r, double *cum_s,
@@ -113,9 +99,8 @@ static void audit_link(const rad_solver *sv, const rad_link *l, uint32_t id,
 {
 	const rad_hier *h = &sv->h;
 	uint32_t r = l->rcv, s = l->src;
-	double zr, zs;
-	v3 cr = node_mid(h, r, &zr), cs = node_mid(h, s, &zs);
-	int near = fmax(zr, zs) > v3_len(v3_sub(cr, cs));
+	double d = v3_len(v3_sub(node_center(h, r), node_center(h, s)));
+	int near = fmax(node_size(h, r), node_size(h, s)) > d;
 	int k = 4 * near + 2 * node_is_cluster(r) + node_is_cluster(s);
 	double ar = node_area(h, r), as = node_area(h, s);
 	double bs = node_luma_B(h, s);
@@ -187,29 +172,15 @@ static void walk_tree(audit_walk *w, uint32_t id)
 		walk_tree(w, l->child + k);
 }
 
-/* hr: the links node t receives, then those of the nodes below it. */
-static void walk_links(audit_walk *w, uint32_t t)
+/* hr: the links node t receives (hr_walk_all visits every node). */
+static rad_status node_links(rad_solver *sv, void *ud, uint32_t t)
 {
-	const rad_hier *h = &w->sv->h;
-	uint32_t head = node_is_cluster(t) ? rad_cluster_at(h, t)->links
-	                                   : rad_elem_at(h, t)->links;
-	for (uint32_t id = head; id != RAD_NONE;) {
-		const rad_link *l = rad_link_at(h, id);
-		visit(w, l, id);
+	for (uint32_t id = *rad_node_links(&sv->h, t); id != RAD_NONE;) {
+		const rad_link *l = rad_link_at(&sv->h, id);
+		visit(ud, l, id);
 		id = l->next;
 	}
-	if (node_is_cluster(t)) {
-		const rad_cluster *c = rad_cluster_at(h, t);
-		if (c->child != RAD_NONE) {
-			walk_links(w, c->child | RAD_TAG_CLUSTER);
-			walk_links(w, (c->child + 1) | RAD_TAG_CLUSTER);
-		}
-		return;
-	}
-	const rad_elem *e = rad_elem_at(h, t);
-	if (e->child != RAD_NONE)
-		for (uint32_t k = 0; k < 4; k++)
-			walk_links(w, e->child + k);
+	return RAD_OK;
 }
 
 rad_status rad_solver_audit_links(rad_solver *sv, const rad_audit_options *o,
@@ -240,9 +211,7 @@ rad_status rad_solver_audit_links(rad_solver *sv, const rad_audit_options *o,
 		for (size_t i = 0; i < st->nroots; i++)
 			walk_tree(&w, st->roots[i]);
 	} else {
-		for (uint32_t i = 0; i < sv->scene->npolys; i++)
-			walk_links(&w, i);
-		walk_links(&w, 0 | RAD_TAG_CLUSTER);
+		hr_walk_all(sv, node_links, &w);
 	}
 	out->links_total = w.seen;
 	rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, cum);

@@ -196,7 +196,7 @@ int node_facing(const rad_hier *h, uint32_t rcv, uint32_t src)
 	return patch_in_front(&ps, &pr, tol) && patch_in_front(&pr, &ps, tol);
 }
 
-static v3 node_center(const rad_hier *h, uint32_t t)
+v3 node_center(const rad_hier *h, uint32_t t)
 {
 	if (node_is_cluster(t))
 		return cluster_center(rad_cluster_at(h, t));

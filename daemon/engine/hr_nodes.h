@@ -46,6 +46,9 @@ double node_area_eff(const rad_hier *h, uint32_t t);
 int node_splittable(const rad_hier *h, uint32_t t);
 /* Characteristic length: longest edge (element), box diagonal (cluster). */
 double node_size(const rad_hier *h, uint32_t t);
+/* Centre of a surface or cluster node: the element's centroid, the
+ * cluster's box centre. */
+v3 node_center(const rad_hier *h, uint32_t t);
 /*
  * Children of a splittable node, tagged, into out[RAD_CLUSTER_LEAF_MAX]
  * (elements are split on demand: not thread-safe).  Returns the count, 0
