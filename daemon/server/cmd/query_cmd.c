@@ -101,6 +101,22 @@ static json_t *run_points(cmd_server *d, query_task *q, double *lux,
 	return reply;
 }
 
+typedef struct lux_stats {
+	double mn, mx, sum, w, emax;
+	size_t n;
+} lux_stats;
+
+static void stats_add(lux_stats *st, double lux, double elux, double w)
+{
+	if (st->n++ == 0)
+		st->mn = st->mx = lux;
+	st->mn = lux < st->mn ? lux : st->mn;
+	st->mx = lux > st->mx ? lux : st->mx;
+	st->sum += lux * w;
+	st->w += w;
+	st->emax = elux > st->emax ? elux : st->emax;
+}
+
 /* The values of the points not left out (skip[i] 0), null for the
  * others. */
 static json_t *kept_json(const double *v, const unsigned char *skip, size_t n)
@@ -137,18 +153,13 @@ static json_t *run_grid(cmd_server *d, query_task *q, double *lux,
 		free(skip);
 		return NULL;
 	}
-	double mn = HUGE_VAL, mx = -HUGE_VAL, sum = 0, emax = 0;
-	size_t kept = 0;
-	for (size_t i = 0; i < q->n; i++) {
-		if (skip[i])
-			continue;
-		emax = lux[q->n + i] > emax ? lux[q->n + i] : emax;
-		mn = lux[i] < mn ? lux[i] : mn;
-		mx = lux[i] > mx ? lux[i] : mx;
-		sum += lux[i];
-		kept++;
-	}
-	double mean = kept ? sum / (double)kept : 0;
+	lux_stats st = {0};
+	for (size_t i = 0; i < q->n; i++)
+		if (!skip[i])
+			stats_add(&st, lux[i], lux[q->n + i], 1);
+	size_t kept = st.n;
+	double mn = st.mn, mx = st.mx, emax = st.emax;
+	double mean = kept ? st.sum / st.w : 0;
 	json_object_set_new(reply, "nu", json_integer(q->nu));
 	json_object_set_new(reply, "nv", json_integer(q->nv));
 	json_object_set_new(reply, "spacing", ej_real(q->spacing));
@@ -278,22 +289,6 @@ typedef struct node_face {
 	double spacing, cell_m2;
 	size_t first, n; /* cells: first index, count */
 } node_face;
-
-typedef struct lux_stats {
-	double mn, mx, sum, w, emax;
-	size_t n;
-} lux_stats;
-
-static void stats_add(lux_stats *st, double lux, double elux, double w)
-{
-	if (st->n++ == 0)
-		st->mn = st->mx = lux;
-	st->mn = lux < st->mn ? lux : st->mn;
-	st->mx = lux > st->mx ? lux : st->mx;
-	st->sum += lux * w;
-	st->w += w;
-	st->emax = elux > st->emax ? elux : st->emax;
-}
 
 static void stats_json(json_t *o, const lux_stats *st)
 {
