@@ -157,20 +157,16 @@ static json_t *ej_audit(const rad_audit *au)
 		json_t *e = json_object();
 		json_object_set_new(e, "class",
 		                    json_string(audit_class_name(k)));
-		json_object_set_new(e, "links",
-		                    json_integer((json_int_t)c->links));
-		json_object_set_new(e, "stored_form",
-		                    json_real(c->stored_form));
+		json_object_set_new(e, "links", jint(c->links));
+		json_object_set_new(e, "stored_form", ej_real(c->stored_form));
 		json_object_set_new(e, "stored_transfer",
-		                    json_real(c->stored_transfer));
-		json_object_set_new(e, "mc_form", json_real(c->mc_form));
-		json_object_set_new(e, "mc_transfer",
-		                    json_real(c->mc_transfer));
+		                    ej_real(c->stored_transfer));
+		json_object_set_new(e, "mc_form", ej_real(c->mc_form));
+		json_object_set_new(e, "mc_transfer", ej_real(c->mc_transfer));
 		json_array_append_new(cls, e);
 	}
-	json_object_set_new(o, "links_total",
-	                    json_integer((json_int_t)au->links_total));
-	json_object_set_new(o, "rays", json_integer((json_int_t)au->rays));
+	json_object_set_new(o, "links_total", jint(au->links_total));
+	json_object_set_new(o, "rays", jint(au->rays));
 	json_object_set_new(o, "classes", cls);
 	return o;
 }
