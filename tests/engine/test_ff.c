@@ -333,6 +333,16 @@ static void test_ff_estimate_tracks_exact(void **state)
 	                          rad_patch_centroid(&r)),
 	                   r.n) < 0);
 	assert_true(rad_ff_estimate(&r, &tilted) > 0);
+	/* A 1 cm strip standing on a receiver's edge (a luminaire's side
+	 * under a ceiling): the centroids see each other at cosine 0.01,
+	 * and the estimate took 1/50 of the exact form factor. */
+	rad_patch ceil = patch(O, V(0.75, 0, 0), V(0, 1, 0), 1);
+	rad_patch strip = patch(O, V(0, 0, 0.01), V(0.75, 0, 0), 1);
+	double exact = 0.01 / 1 * ff_perpendicular(0.75, 0.01, 1);
+	double est = rad_ff_estimate(&ceil, &strip);
+	print_message("strip on an edge: estimate %.3g, exact %.3g\n", est,
+	              exact);
+	assert_rel(est, exact, 0.5);
 }
 
 /* Mean of |x - c|^2 over the samples. */
