@@ -585,6 +585,23 @@ static double ff_iso(const rad_solver *sv, uint32_t rcv, uint32_t src,
 	             : rcv_rows(h, rcv, NULL, rows, used, rays, NULL);
 }
 
+/*
+ * A source less than a quarter of its receiver's area, closer to it than
+ * the receiver's size: its form factor is integrated over the source's
+ * points (F(r <- s) = A_s / A_r F(s <- r), each point with the exact form
+ * factor of the whole receiver), not over the receiver's.  A few points on
+ * a large receiver miss where a small source's light lands when that is
+ * within centimetres of it (a luminaire's 1 cm side under a ceiling: the
+ * ceiling element's points, decimetres away, gave F tens of times too
+ * small).  The spread stays the receiver's: the variation test still
+ * splits a receiver that sees the source unevenly.
+ */
+static int small_source_near(const rad_patch *pr, const rad_patch *ps)
+{
+	v3 d = v3_sub(rad_patch_centroid(pr), rad_patch_centroid(ps));
+	return 4 * ps->area < pr->area && v3_dot(d, d) < pr->area;
+}
+
 double node_ff(const rad_solver *sv, uint32_t rcv, uint32_t src, uint64_t *rays,
                double *spread)
 {
@@ -612,9 +629,17 @@ double node_ff(const rad_solver *sv, uint32_t rcv, uint32_t src, uint64_t *rays,
 	double cover = es->exposed == RAD_EXPOSED_ALL
 	                       ? 0
 	                       : rad_hier_cover_dist(h, es->poly);
+	double rcover = rcv_cover(h, rcv, &ex);
 	f = rad_ff_patch_spread(sv->scene->vis, &pr, &ps, sv->opt.rcv_samples,
-	                        sv->opt.vis_samples, cover,
-	                        rcv_cover(h, rcv, &ex), rays, spread);
+	                        sv->opt.vis_samples, cover, rcover, rays,
+	                        spread);
+	if (small_source_near(&pr, &ps)) {
+		double sp;
+		double g = rad_ff_patch_spread(
+		        sv->scene->vis, &ps, &pr, sv->opt.vis_samples,
+		        sv->opt.rcv_samples, rcover, cover, rays, &sp);
+		f = g * ps.area / pr.area;
+	}
 	*spread *= ex;
 	return f * ex;
 }
