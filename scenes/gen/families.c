@@ -234,6 +234,48 @@ void sg_build_slabroom(scene *sc, const params *p)
 	              1);
 }
 
+/*
+ * A grey 4 x 4 x 3 m room (floor and walls 0.5, ceiling 0.8) lit by a
+ * thin luminaire mounted under the ceiling's centre: a 0.75 m square box
+ * 1 cm deep of 1000 cd/m2.  `thin`: all five outer faces emit, as in the
+ * Blender export of the Cornell box (the sides send 5 % of the light,
+ * half of it onto the ceiling within centimetres); `cove`: only the
+ * sides emit and the bottom is black, so every lux on the floor comes
+ * from them, most of it by way of the ceiling band they light.
+ */
+static void thin_luminaire_room(scene *sc, int cove)
+{
+	mesh *room = sg_mesh_new(sc, grey(0.5), "room");
+	mesh *ceiling = sg_mesh_new(sc, grey(0.8), "ceiling");
+	sg_quad(room, P(0, 0, 0), P(0, 0, 4), P(4, 0, 4), P(4, 0, 0));
+	sg_quad(ceiling, P(0, 3, 0), P(4, 3, 0), P(4, 3, 4), P(0, 3, 4));
+	sg_quad(room, P(0, 0, 0), P(4, 0, 0), P(4, 3, 0), P(0, 3, 0));
+	sg_quad(room, P(4, 0, 4), P(0, 0, 4), P(0, 3, 4), P(4, 3, 4));
+	sg_quad(room, P(0, 0, 4), P(0, 0, 0), P(0, 3, 0), P(0, 3, 4));
+	sg_quad(room, P(4, 0, 0), P(4, 0, 4), P(4, 3, 4), P(4, 3, 0));
+	double a = 1.625, b = 2.375, y0 = 2.99, y1 = 3;
+	mesh *lum = sg_mesh_new(sc, emitter(1000), "luminaire");
+	mesh *bottom =
+	        cove ? sg_mesh_new(sc, grey(0), "luminaire-bottom") : lum;
+	sg_quad(bottom, P(a, y0, a), P(b, y0, a), P(b, y0, b), P(a, y0, b));
+	sg_quad(lum, P(a, y0, a), P(a, y1, a), P(b, y1, a), P(b, y0, a));
+	sg_quad(lum, P(b, y0, b), P(b, y1, b), P(a, y1, b), P(a, y0, b));
+	sg_quad(lum, P(a, y0, b), P(a, y1, b), P(a, y1, a), P(a, y0, a));
+	sg_quad(lum, P(b, y0, a), P(b, y1, a), P(b, y1, b), P(b, y0, b));
+}
+
+void sg_build_thinlum(scene *sc, const params *p)
+{
+	(void)p;
+	thin_luminaire_room(sc, 0);
+}
+
+void sg_build_cove(scene *sc, const params *p)
+{
+	(void)p;
+	thin_luminaire_room(sc, 1);
+}
+
 /* --------------------------------------------------------------- field */
 
 static const mat *palette(uint64_t *rng)

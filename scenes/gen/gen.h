@@ -222,6 +222,8 @@ void sg_build_box(scene *sc, const params *p);
 void sg_build_room(scene *sc, const params *p);
 void sg_build_obstructed(scene *sc, const params *p);
 void sg_build_slabroom(scene *sc, const params *p);
+void sg_build_thinlum(scene *sc, const params *p);
+void sg_build_cove(scene *sc, const params *p);
 void sg_build_field(scene *sc, const params *p);
 void sg_build_herd(scene *sc, const params *p);
 void sg_build_hall_empty(scene *sc, const params *p);

@@ -48,6 +48,8 @@ enum kind_id {
 	KD_ROOM,
 	KD_OBSTRUCTED,
 	KD_SLABROOM,
+	KD_THINLUM,
+	KD_COVE,
 	KD_FIELD,
 	KD_HERD,
 	KD_HALL_EMPTY,
@@ -89,6 +91,13 @@ static const kind kinds[NKINDS] = {
 		"a grey 4 x 4 x 3 m room whose floor, ceiling and walls\n"
 		"run 0.3 m past its corners, as architectural exports write\n"
 		"them; a 1 m2 panel 8 cm under the ceiling. 14 triangles"},
+	[KD_THINLUM] = {"thinlum", sg_build_thinlum, 0,
+		"a grey 4 x 4 x 3 m room lit by a 0.75 m square luminaire\n"
+		"1 cm deep under its ceiling, all five faces emitting\n"
+		"1000 cd/m2. 22 triangles -> 11 polygons"},
+	[KD_COVE] = {"cove", sg_build_cove, 0,
+		"the thinlum room with the luminaire's bottom black: only\n"
+		"its 1 cm sides emit. 22 triangles -> 11 polygons"},
 	[KD_FIELD] = {"field", sg_build_field, 0,
 		"random boxes, spheres and cylinders on a ground plane\n"
 		"under emissive panels and point lights (clustering)"},

@@ -87,6 +87,8 @@ scenes=(
 	"box16-0.7|$(gen box16-0.7 box --rho 0.7 --subdiv 16)|$VAL/box.points|exact:1047.197551"
 	"room-0.9|$(gen room-0.9 room --rho 0.9)|$VAL/room.points|mc"
 	"slabroom|$(gen slabroom slabroom)|$VAL/slabroom.points|mc"
+	"thinlum|$(gen thinlum thinlum)|$VAL/thinlum.points|mc"
+	"cove|$(gen cove cove)|$VAL/thinlum.points|mc"
 	"graz|$REAL/renderpark/graz.gltf|$VAL/graz.points|mc"
 	"hospital|$REAL/renderpark/hospital.gltf|$VAL/hospital.points|mc"
 	"blender-cornell|$REAL/vinc3r-cornellbox/BJS-2.80-Eevee-gltf/cornellBox-2.80-Eevee-gltf.gltf|$VAL/blender-cornell.points|mc"

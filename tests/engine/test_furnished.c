@@ -39,7 +39,7 @@
  * A room whose slabs and walls run past its corners (test_slab_room).
  *
  * A thin luminaire whose edges light the ceiling they touch
- * (test_ceiling_lit_by_thin_edges).
+ * (test_room_with_thin_luminaire).
  */
 #include <math.h>
 #include <setjmp.h>
@@ -529,64 +529,24 @@ static void test_slab_room(void **state)
 }
 
 /*
- * A closed room (4 x 4 x 3 m: floor and walls 0.5, ceiling 0.8) lit by a
- * thin luminaire mounted under its ceiling, as the Blender export of the
- * Cornell box has one: a 0.75 m square box 1 cm deep whose bottom and
- * four sides all emit.  The sides send 5 % of the light, and half of it
- * lands on the ceiling within a few centimetres of them.  Seen from the
- * centres of a large ceiling element and of a side, the pair grazes
- * (cosine 0.01) and the element's sample points lie decimetres from
- * where the light lands: the pair was estimated negligible and its form
- * factor came out tens of times too small.
- */
-static rad_scene *room_with_thin_luminaire(void)
-{
-	rad_error err;
-	const double black[3] = {0, 0, 0}, grey[3] = {0.5, 0.5, 0.5},
-	             white[3] = {0.8, 0.8, 0.8}, lum[3] = {1000, 1000, 1000};
-	rad_scene *s = NULL;
-	uint32_t node;
-	assert_int_equal(rad_scene_new(&s, &err), RAD_OK);
-	assert_int_equal(rad_scene_add_node(s, "room", &node, &err), RAD_OK);
-	uint32_t walls = material(s, grey, black),
-	         ceiling = material(s, white, black),
-	         lamp = material(s, black, lum);
-	const double room[6][4][3] = {
-	        {{0, 0, 0}, {0, 0, 4}, {4, 0, 4}, {4, 0, 0}}, /* floor */
-	        {{0, 3, 0}, {4, 3, 0}, {4, 3, 4}, {0, 3, 4}}, /* ceiling */
-	        {{0, 0, 0}, {4, 0, 0}, {4, 3, 0}, {0, 3, 0}}, /* z = 0 */
-	        {{4, 0, 4}, {0, 0, 4}, {0, 3, 4}, {4, 3, 4}}, /* z = 4 */
-	        {{0, 0, 4}, {0, 0, 0}, {0, 3, 0}, {0, 3, 4}}, /* x = 0 */
-	        {{4, 0, 0}, {4, 0, 4}, {4, 3, 4}, {4, 3, 0}}, /* x = 4 */
-	};
-	for (int k = 0; k < 6; k++)
-		add_quad(s, k == 1 ? ceiling : walls, node, room[k], 0);
-	/* The box 1.625 .. 2.375 in x and z, 2.99 .. 3 in y. */
-	const double a = 1.625, b = 2.375, y0 = 2.99, y1 = 3;
-	const double box[5][4][3] = {
-	        {{a, y0, a}, {b, y0, a}, {b, y0, b}, {a, y0, b}}, /* bottom */
-	        {{a, y0, a}, {a, y1, a}, {b, y1, a}, {b, y0, a}}, /* -z */
-	        {{b, y0, b}, {b, y1, b}, {a, y1, b}, {a, y0, b}}, /* +z */
-	        {{a, y0, b}, {a, y1, b}, {a, y1, a}, {a, y0, a}}, /* -x */
-	        {{b, y0, a}, {b, y1, a}, {b, y1, b}, {b, y0, b}}, /* +x */
-	};
-	for (int k = 0; k < 5; k++)
-		add_quad(s, lamp, node, box[k], 0);
-	assert_int_equal(rad_scene_commit(s, &err), RAD_OK);
-	return s;
-}
-
-/*
- * Each point within the target, and the plane's mean error (the light the
- * solution gained or lost; 0.08 % standard error over 25 points) within
- * 1 %: hr read -2.2 % (rmb -1.5 %), every point low, before thin sources
- * near large receivers were estimated and integrated from the source's
- * side (ff.c near_estimate, hr_nodes.c small_source_near); -0.7 % now.
+ * A closed room lit by a thin luminaire under its ceiling
+ * (luxrad-scenegen thinlum: a 0.75 m square box 1 cm deep, all five faces
+ * emitting).  The sides send 5 % of the light, and half of it lands on
+ * the ceiling within a few centimetres of them.  Seen from the centres
+ * of a large ceiling element and of a side, the pair grazes (cosine
+ * 0.01) and the element's sample points lie decimetres from where the
+ * light lands: the pair was estimated negligible and its form factor
+ * came out tens of times too small.  Each point within the target, and
+ * the plane's mean error (the light the solution gained or lost; 0.08 %
+ * standard error over 25 points) within 1 %: hr read -2.2 % (rmb
+ * -1.5 %), every point low, before thin sources near large receivers
+ * were estimated and integrated from the source's side (ff.c
+ * near_estimate, hr_nodes.c small_source_near); -0.8 % now.
  */
 static void test_room_with_thin_luminaire(void **state)
 {
 	(void)state;
-	rad_scene *s = room_with_thin_luminaire();
+	rad_scene *s = generated_scene("thinlum");
 	double pts[MAXPTS][6], ref[MAXPTS], sd[MAXPTS];
 	grid_5x5(pts, 0.4, 0.8, 0.4, 0.8);
 	reference_lux(s, pts, MAXPTS, ref, sd);
