@@ -237,9 +237,9 @@ void sg_build_slabroom(scene *sc, const params *p)
 /*
  * A grey 4 x 4 x 3 m room (floor and walls 0.5, ceiling 0.8) lit by a
  * thin luminaire mounted under the ceiling's centre: a 0.75 m square box
- * 1 cm deep of 1000 cd/m2.  `thin`: all five outer faces emit, as in the
- * Blender export of the Cornell box (the sides send 5 % of the light,
- * half of it onto the ceiling within centimetres); `cove`: only the
+ * 1 cm deep of 1000 cd/m2.  thinlum: all five outer faces emit, as in
+ * the Blender export of the Cornell box (the sides send 5 % of the
+ * light, half of it onto the ceiling within centimetres); cove: only the
  * sides emit and the bottom is black, so every lux on the floor comes
  * from them, most of it by way of the ceiling band they light.
  */
