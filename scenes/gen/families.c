@@ -247,21 +247,15 @@ static void thin_luminaire_room(scene *sc, int cove)
 {
 	mesh *room = sg_mesh_new(sc, grey(0.5), "room");
 	mesh *ceiling = sg_mesh_new(sc, grey(0.8), "ceiling");
-	sg_quad(room, P(0, 0, 0), P(0, 0, 4), P(4, 0, 4), P(4, 0, 0));
-	sg_quad(ceiling, P(0, 3, 0), P(4, 3, 0), P(4, 3, 4), P(0, 3, 4));
-	sg_quad(room, P(0, 0, 0), P(4, 0, 0), P(4, 3, 0), P(0, 3, 0));
-	sg_quad(room, P(4, 0, 4), P(0, 0, 4), P(0, 3, 4), P(4, 3, 4));
-	sg_quad(room, P(0, 0, 4), P(0, 0, 0), P(0, 3, 0), P(0, 3, 4));
-	sg_quad(room, P(4, 0, 0), P(4, 0, 4), P(4, 3, 4), P(4, 3, 0));
-	double a = 1.625, b = 2.375, y0 = 2.99, y1 = 3;
+	obox r = aabb(P(0, 0, 0), P(4, 3, 4));
+	for (int f = 0; f < NFACES; f++)
+		sg_box_face(f == F_PY ? ceiling : room, &r, f, 1, true);
+	obox box = aabb(P(1.625, 2.99, 1.625), P(2.375, 3, 2.375));
 	mesh *lum = sg_mesh_new(sc, emitter(1000), "luminaire");
-	mesh *bottom =
-	        cove ? sg_mesh_new(sc, grey(0), "luminaire-bottom") : lum;
-	sg_quad(bottom, P(a, y0, a), P(b, y0, a), P(b, y0, b), P(a, y0, b));
-	sg_quad(lum, P(a, y0, a), P(a, y1, a), P(b, y1, a), P(b, y0, a));
-	sg_quad(lum, P(b, y0, b), P(b, y1, b), P(a, y1, b), P(a, y0, b));
-	sg_quad(lum, P(a, y0, b), P(a, y1, b), P(a, y1, a), P(a, y0, a));
-	sg_quad(lum, P(b, y0, a), P(b, y1, a), P(b, y1, b), P(b, y0, b));
+	sg_box(lum, &box, OMIT(F_PY) | (cove ? OMIT(F_NY) : 0));
+	if (cove)
+		sg_box_face(sg_mesh_new(sc, grey(0), "luminaire-bottom"), &box,
+		            F_NY, 1, false);
 }
 
 void sg_build_thinlum(scene *sc, const params *p)
