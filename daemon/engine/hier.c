@@ -234,8 +234,6 @@ static rad_status build_cluster(rad_hier *h, uint32_t c, rad_error *err)
 
 /* ------------------------------------------------------- covered parts */
 
-#define COVER_SAMPLES 16
-
 double rad_hier_cover_dist(const rad_hier *h, uint32_t poly)
 {
 	const rad_scene *s = h->scene;
@@ -245,15 +243,15 @@ double rad_hier_cover_dist(const rad_hier *h, uint32_t poly)
 	return fmin(0.15 * edge, 5e-3 * s->diag);
 }
 
-/* Measure e's exposed fraction on COVER_SAMPLES points (vis: the BVH). */
+/* Measure e's exposed fraction on RAD_COVER_SAMPLES points (vis: the BVH). */
 static void measure_exposed(const rad_hier *h, rad_elem *e)
 {
 	const rad_vis *v = h->scene->vis;
 	double dist = rad_hier_cover_dist(h, e->poly);
 	rad_patch p;
-	v3 pts[COVER_SAMPLES];
+	v3 pts[RAD_COVER_SAMPLES];
 	rad_patch_from_floats(&p, e->p0, e->e1, e->e2, e->quad);
-	int n = rad_patch_scatter(&p, COVER_SAMPLES, pts), open = 0;
+	int n = rad_patch_scatter(&p, RAD_COVER_SAMPLES, pts), open = 0;
 	for (int k = 0; k < n; k++)
 		open += !rad_vis_covered(v, pts[k], p.n, dist);
 	e->exposed = (uint8_t)((open * RAD_EXPOSED_ALL + n / 2) / n);
@@ -389,9 +387,10 @@ uint32_t rad_elem_split(rad_hier *h, uint32_t id)
 		memcpy(ch->dB, e->dB, sizeof(ch->dB));
 		ch->level = (uint8_t)(e->level + 1);
 		ch->quad = e->quad;
+		/* Every quarter measures its own: a parent's points can
+		 * miss a cover that a quarter straddles (hier.h). */
 		ch->exposed = e->exposed;
-		/* Not wholly exposed: the quarters measure their own. */
-		if (e->exposed != RAD_EXPOSED_ALL)
+		if (h->scene->vis)
 			measure_exposed(h, ch);
 	}
 	e->child = c;
