@@ -78,7 +78,9 @@
  *     the shares keep the power), and a cluster hands its polygons shares
  *     weighted by theirs;
  *   - the point query reads B / exposed, since its rays towards the
- *     covered part are blocked anyway.
+ *     covered part are blocked anyway, and the share of a leaf partly
+ *     covered that a point sees on the points that measured `exposed`;
+ *     it does not take an element partly covered whole (query.c).
  * Every quarter measures its own (16 short rays per element made): the
  * parent's 16 points can miss a cover that a quarter straddles.  A
  * 0.75 m luminaire 1 cm under a 4 m ceiling (luxrad-scenegen thinlum,
