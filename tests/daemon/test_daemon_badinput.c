@@ -11,7 +11,9 @@
  *    options and a malformed scene get their documented errors (with a
  *    message) and the connection stays usable;
  *  - throughout, the other client's job keeps running, its queries are
- *    answered, its iteration events arrive in order and it ends done.
+ *    answered, its iteration events arrive in order and it ends done;
+ *  - names chosen to forge a log line, drive a terminal or reorder text are
+ *    written to the log escaped (test_names_are_escaped_in_the_log).
  */
 #include <setjmp.h>
 #include <stdarg.h>
@@ -500,6 +502,83 @@ static void test_bad_requests_get_errors_and_keep_the_session(void **state)
 	dm_pass();
 }
 
+/* 1 if the n bytes at p hold the NUL-terminated string s. */
+static int has(const unsigned char *p, size_t n, const char *s)
+{
+	size_t k = strlen(s);
+	for (size_t i = 0; i + k <= n; i++)
+		if (memcmp(p + i, s, k) == 0)
+			return 1;
+	return 0;
+}
+
+/*
+ * A scene and a job named to forge a log line (a newline, then a line of
+ * the log's own form), clear the terminal (ESC [2J), open a C1 control
+ * sequence (U+009B), reverse what follows (U+202E) and fake an escape (a
+ * literal backslash-x0a).  The log stays one line per message, each
+ * starting with the daemon's timestamp, with no control byte but the
+ * newlines that end lines and no hidden code point; the names appear
+ * escaped.  Before names were escaped, the forged line stood in the log
+ * as a line of its own.
+ */
+static void test_names_are_escaped_in_the_log(void **state)
+{
+	(void)state;
+	static const char evil[] = "lobby\n2030-01-01T00:00:00.000Z ERROR "
+	                           "forged\x1b[2J\xc2\x9b"
+	                           "31m\xe2\x80\xae"
+	                           "tpircs\\x0a";
+	dm_daemon *d = dm_start(NULL);
+	dm_conn *c = dm_open(d, NULL);
+	char path[512];
+	json_t *sc = dm_upload_file(
+	        c, dm_sample("cornell.gltf", path, sizeof(path)), evil);
+	json_t *r = dm_ok(c, "{s:s, s:O, s:s}", "cmd", "job.create", "scene",
+	                  sc, "name", evil);
+	json_decref(r);
+	/* The same names come back unchanged over the protocol. */
+	r = dm_ok(c, "{s:s}", "cmd", "scene.list");
+	json_t *first = json_array_get(json_object_get(r, "scenes"), 0);
+	assert_string_equal(json_string_value(json_object_get(first, "name")),
+	                    evil);
+	json_decref(r);
+	dm_stop(d);
+
+	size_t n;
+	unsigned char *log = dm_read_file(d->log_path, &n);
+	int lines = 0;
+	for (size_t i = 0; i < n; i++) {
+		if ((i == 0 || log[i - 1] == '\n') &&
+		    (n - i < 4 || memcmp(log + i, "===", 3) != 0)) {
+			/* "YYYY-MM-DDTHH:MM:SS.mmmZ LEVEL ", not 2030's (the
+			 * harness's own lines start "=== harness"). */
+			if (!(n - i > 25 && log[i + 4] == '-' &&
+			      log[i + 10] == 'T' && log[i + 23] == 'Z' &&
+			      memcmp(log + i, "2030-", 5) != 0))
+				dm_fail("log line %d is not the daemon's: "
+				        "%.40s",
+				        lines + 1, (const char *)log + i);
+			lines++;
+		}
+		if ((log[i] < 0x20 && log[i] != '\n') || log[i] == 0x7f)
+			dm_fail("control byte 0x%02x in the log at %zu", log[i],
+			        i);
+	}
+	assert_true(lines > 3);
+	assert_false(has(log, n, "\xc2\x9b"));
+	assert_false(has(log, n, "\xe2\x80\xae"));
+	/* Each name written escaped: in the upload's and the job's lines. */
+	assert_true(has(log, n,
+	                "lobby\\x0a2030-01-01T00:00:00.000Z ERROR forged"
+	                "\\x1b[2J\\u009b31m\\u202etpircs\\\\x0a"));
+	assert_true(has(log, n, "scene 1 'lobby\\x0a"));
+	assert_true(has(log, n, "job 1 'lobby\\x0a"));
+	free(log);
+	json_decref(sc);
+	dm_pass();
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -508,6 +587,7 @@ int main(void)
 	        T(test_oversized_header_and_payload_are_too_large),
 	        T(test_truncated_frames_then_close_are_forgotten),
 	        T(test_bad_requests_get_errors_and_keep_the_session),
+	        T(test_names_are_escaped_in_the_log),
 #undef T
 	};
 	const char *filter = getenv("LUXRAD_TEST_FILTER");
