@@ -329,12 +329,20 @@ static rad_status hr_step(rad_solver *sv, rad_error *err)
 	rad_hier *h = &sv->h;
 	wave_step_begin(sv, &st->wave);
 	rad_status rs = RAD_OK;
-	if (!st->started)
+	if (!st->started) {
 		rs = hr_initial_links(sv, st);
-	else if (!st->frozen)
+		st->started = rs != RAD_ERR_CANCELLED;
+	} else if (!st->frozen) {
 		rs = hr_retest_links(sv, st);
-	st->started = 1;
+	}
 	release_scratch(sv, st);
+	if (rs == RAD_ERR_CANCELLED)
+		return rad_fail(
+		        err, rs,
+		        "hr: cancelled while linking every pair of "
+		        "polygons (%u of %u rows linked); the next step "
+		        "goes on from there",
+		        st->init_row, sv->scene->npolys);
 	if (rs)
 		return wave_failed(sv, rs, err);
 	rad_solver_progress(sv, 0.8);

@@ -14,16 +14,18 @@ typedef struct hr_pair {
 } hr_pair;
 
 typedef struct hr_state {
-	rad_wave wave;    /* items: hr_pair */
-	int started;      /* initial links made */
-	double mean_B;    /* area-mean photopic radiosity of the last step */
-	double last_r;    /* residual of the last step */
-	int frozen;       /* refinement stopped (hr_step) */
-	int clip;         /* leaves' gain held below 1 (node_extra) */
-	double chg[3][3]; /* sum A |dB| per channel, last three steps */
-	double q_jump;    /* rate of the last extrapolation (tail) */
-	int since;        /* steps since it (or since the start) */
-	double *vals;     /* scratch for budget_cut */
+	rad_wave wave;     /* items: hr_pair */
+	int started;       /* initial links made */
+	uint32_t init_row; /* without clustering: rows of polygon pairs linked
+	                      so far (hr_initial_links goes on from there) */
+	double mean_B;     /* area-mean photopic radiosity of the last step */
+	double last_r;     /* residual of the last step */
+	int frozen;        /* refinement stopped (hr_step) */
+	int clip;          /* leaves' gain held below 1 (node_extra) */
+	double chg[3][3];  /* sum A |dB| per channel, last three steps */
+	double q_jump;     /* rate of the last extrapolation (tail) */
+	int since;         /* steps since it (or since the start) */
+	double *vals;      /* scratch for budget_cut */
 	size_t vals_cap;
 } hr_state;
 

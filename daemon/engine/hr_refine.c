@@ -162,37 +162,52 @@ static rad_status refine_waves(rad_solver *sv, hr_state *st)
 	return RAD_OK;
 }
 
+/*
+ * Without clusters every pair of polygons is a link to judge: O(n^2) form
+ * factors, minutes for tens of thousands of polygons.  The rows are linked
+ * in blocks of INIT_BLOCK_PAIRS pairs, and the cancel flag (cancel, pause,
+ * time budget, shutdown) is looked at after each: a cancelled first step
+ * returns RAD_ERR_CANCELLED with the rows done kept (st->init_row), and
+ * the next step goes on from the next row.  A block judges its pairs at
+ * once (wave.c), so the flag is seen within one block's form factors.
+ */
+#define INIT_BLOCK_PAIRS (1u << 14)
+
 rad_status hr_initial_links(rad_solver *sv, hr_state *st)
 {
 	const rad_scene *s = sv->scene;
 	rad_status rs = RAD_OK;
-	for (uint32_t l = 0; l < s->nlights && !rs; l++)
-		rs = push_pair(sv, &st->wave.todo, RAD_TAG_CLUSTER,
-		               l | RAD_TAG_LIGHT, 0);
-	if (rs)
-		return rs;
+	uint32_t n = s->npolys;
 	if (sv->opt.clustering) {
-		rs = push_pair(sv, &st->wave.todo, RAD_TAG_CLUSTER,
-		               RAD_TAG_CLUSTER, 0);
+		for (uint32_t l = 0; l < s->nlights && !rs; l++)
+			rs = push_pair(sv, &st->wave.todo, RAD_TAG_CLUSTER,
+			               l | RAD_TAG_LIGHT, 0);
+		if (!rs)
+			rs = push_pair(sv, &st->wave.todo, RAD_TAG_CLUSTER,
+			               RAD_TAG_CLUSTER, 0);
 		return rs ? rs : refine_waves(sv, st);
 	}
 	/* Without clusters, lights link to every polygon directly. */
 	st->wave.todo.n = 0;
-	uint32_t n = s->npolys;
-	for (uint32_t i = 0; i < n && !rs; i++)
-		for (uint32_t l = 0; l < s->nlights && !rs; l++)
-			rs = push_pair(sv, &st->wave.todo, i, l | RAD_TAG_LIGHT,
-			               0);
-	if (!rs)
-		rs = refine_waves(sv, st);
-	for (uint32_t i = 0; i < n && !rs; i++) {
+	if (st->init_row == 0) {
+		for (uint32_t i = 0; i < n && !rs; i++)
+			for (uint32_t l = 0; l < s->nlights && !rs; l++)
+				rs = push_pair(sv, &st->wave.todo, i,
+				               l | RAD_TAG_LIGHT, 0);
+		if (!rs)
+			rs = refine_waves(sv, st);
+	}
+	for (uint32_t i = st->init_row; i < n && !rs; i++) {
 		for (uint32_t j = 0; j < n && !rs; j++)
 			if (i != j)
 				rs = push_pair(sv, &st->wave.todo, i, j, 0);
 		if (!rs &&
-		    (st->wave.todo.n >= WAVE_BLOCK_PAIRS || i + 1 == n)) {
+		    (st->wave.todo.n >= INIT_BLOCK_PAIRS || i + 1 == n)) {
 			rs = refine_waves(sv, st);
+			st->init_row = i + 1;
 			rad_solver_progress(sv, 0.8 * (i + 1) / n);
+			if (!rs && i + 1 < n && rad_solver_cancelled(sv))
+				return RAD_ERR_CANCELLED;
 		}
 	}
 	return rs;

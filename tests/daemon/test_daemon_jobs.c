@@ -15,16 +15,21 @@
  *    (every iteration and state event, progress maybe dropped and
  *    counted) or closed with slow_consumer;
  *  - max_scenes, max_jobs and max_subscriptions: "limit", the session
- *    goes on; deleting frees the slot.
+ *    goes on; deleting frees the slot;
+ *  - hr without clustering, whose first iteration links every pair of
+ *    polygons, answers pause and cancel, keeps a seconds budget and lets
+ *    the daemon stop on SIGTERM within seconds.
  */
 #include <math.h>
 #include <setjmp.h>
+#include <signal.h>
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/wait.h>
 
 #include <cmocka.h>
 
@@ -822,6 +827,91 @@ static void test_job_and_subscription_limits(void **state)
 	dm_pass();
 }
 
+/*
+ * A closed box of 9,600 quads, hr with clustering off: the first iteration
+ * links all 92 M pairs of polygons, minutes of form factors.  The engine
+ * looks at the cancel flag between blocks of pairs (hr_refine.c), so
+ * job.pause and job.cancel reply within 10 s, a seconds budget of 0.5 s
+ * pauses the job within 10 s, and SIGTERM stops the daemon, status 0,
+ * within 15 s.  Before, none of them came back before the whole loop had
+ * run.
+ */
+static json_t *timed(dm_conn *c, const char *what, const char *cmd, json_t *job,
+                     const char *state)
+{
+	double t0 = dm_now_ms();
+	json_t *r =
+	        dm_call_maybe(c, 10000, "{s:s, s:O}", "cmd", cmd, "job", job);
+	if (!r)
+		dm_fail("%s: no reply within 10 s", what);
+	dm_require_ok(r, what);
+	assert_string_equal(json_string_value(dm_get(r, "state")), state);
+	print_message("%s: reply in %.0f ms\n", what, dm_now_ms() - t0);
+	return r;
+}
+
+/* Run job to convergence and wait 0.3 s into its first iteration. */
+static void run_a_while(dm_conn *c, json_t *job)
+{
+	json_decref(dm_ok(c, "{s:s, s:O, s:b}", "cmd", "job.run", "job", job,
+	                  "converge", 1));
+	json_decref(dm_wait_job(c, job, "running", 60000));
+	dm_sleep_ms(300);
+}
+
+/* A new hr job on sc with clustering off, one thread. */
+static json_t *unclustered_job(dm_conn *c, const json_t *sc)
+{
+	json_t *opt = json_pack("{s:i, s:b}", "threads", 1, "clustering", 0);
+	json_t *job = dm_job_create(c, sc, "hr", opt);
+	json_decref(opt);
+	return job;
+}
+
+static void test_unclustered_job_stops_when_asked(void **state)
+{
+	(void)state;
+	dm_daemon *d = dm_start(NULL);
+	dm_conn *c = dm_open(d, NULL);
+	char path[512];
+	json_t *sc = dm_upload_file(c,
+	                            dm_gen_scene("box40.glb",
+	                                         "box --subdiv 40 --rho 0.5",
+	                                         path, sizeof(path)),
+	                            "box40");
+	json_t *job = unclustered_job(c, sc);
+	run_a_while(c, job);
+	json_decref(timed(c, "job.pause", "job.pause", job, "paused"));
+	json_decref(dm_wait_job(c, job, "paused", 10000));
+
+	/* A budget of half a second, spent within the first iteration. */
+	double t0 = dm_now_ms();
+	json_decref(dm_ok(c, "{s:s, s:O, s:f}", "cmd", "job.run", "job", job,
+	                  "seconds", 0.5));
+	json_t *j = dm_wait_job(c, job, "paused", 10000);
+	print_message("seconds 0.5: paused after %.0f ms\n", dm_now_ms() - t0);
+	assert_int_equal(dm_int(j, "iteration"), 0);
+	json_decref(j);
+
+	run_a_while(c, job);
+	json_decref(timed(c, "job.cancel", "job.cancel", job, "cancelled"));
+	json_decref(dm_wait_job(c, job, "cancelled", 10000));
+	json_decref(job);
+
+	/* A second such job running when the daemon is told to stop. */
+	job = unclustered_job(c, sc);
+	run_a_while(c, job);
+	t0 = dm_now_ms();
+	dm_signal(d, SIGTERM);
+	if (!dm_wait_exit(d, 15000))
+		dm_fail("SIGTERM: still running after 15 s");
+	print_message("SIGTERM: exited after %.0f ms\n", dm_now_ms() - t0);
+	assert_true(WIFEXITED(d->status) && WEXITSTATUS(d->status) == 0);
+	json_decref(job);
+	json_decref(sc);
+	dm_pass();
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -831,6 +921,7 @@ int main(void)
 	        T(test_subscriber_sees_ordered_events),
 	        T(test_slow_subscriber_does_not_stall_anyone),
 	        T(test_job_and_subscription_limits),
+	        T(test_unclustered_job_stops_when_asked),
 #undef T
 	};
 	const char *filter = getenv("LUXRAD_TEST_FILTER");
