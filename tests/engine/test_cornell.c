@@ -19,6 +19,7 @@
 
 #include <cmocka.h>
 
+#include "leaf_area.h"
 #include "rad.h"
 #include "sceneio.h"
 
@@ -128,16 +129,7 @@ static void sum_leaf(void *ud, uint32_t node, const double p[4][3], int nv,
 {
 	node_sum *ns = ud;
 	(void)radiosity;
-	double e1[3], e2[3];
-	for (int k = 0; k < 3; k++) {
-		e1[k] = p[1][k] - p[0][k];
-		e2[k] = p[nv - 1][k] - p[0][k];
-	}
-	double c[3] = {e1[1] * e2[2] - e1[2] * e2[1],
-	               e1[2] * e2[0] - e1[0] * e2[2],
-	               e1[0] * e2[1] - e1[1] * e2[0]};
-	double a = sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]) *
-	           (nv == 3 ? 0.5 : 1);
+	double a = leaf_area(p, nv);
 	assert_true(node < 16);
 	ns->flux[node] += a * (0.2126 * irradiance[0] + 0.7152 * irradiance[1] +
 	                       0.0722 * irradiance[2]);

@@ -32,6 +32,7 @@
 #include <cmocka.h>
 
 #include "closed_forms.h"
+#include "leaf_area.h"
 #include "rad.h"
 
 #define PANEL_L 1000.0 /* panel luminance, cd/m2 */
@@ -643,24 +644,6 @@ typedef struct leaf_sum {
 
 #define NODE_UNSEEN UINT32_MAX
 
-/* Area of the fan p0, pk, pk+1. */
-static double fan_area(const double p[4][3], int nv)
-{
-	double a = 0;
-	for (int k = 1; k + 1 < nv; k++) {
-		double u[3], v[3];
-		for (int i = 0; i < 3; i++) {
-			u[i] = p[k][i] - p[0][i];
-			v[i] = p[k + 1][i] - p[0][i];
-		}
-		double c[3] = {u[1] * v[2] - u[2] * v[1],
-		               u[2] * v[0] - u[0] * v[2],
-		               u[0] * v[1] - u[1] * v[0]};
-		a += 0.5 * sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]);
-	}
-	return a;
-}
-
 static void sum_leaf(void *ud, uint32_t nd, const double p[4][3], int nv,
                      const double B[3], const double I[3])
 {
@@ -676,7 +659,7 @@ static void sum_leaf(void *ud, uint32_t nd, const double p[4][3], int nv,
 			c[i] += p[k][i] / nv;
 	int panel = fabs(c[2] - ROOM_Z) < 1e-9 && c[0] > 1.5 && c[0] < 2.5 &&
 	            c[1] > 1.5 && c[1] < 2.5;
-	double a = fan_area(p, nv), want = panel ? M_PI * PANEL_L : 0;
+	double a = leaf_area(p, nv), want = panel ? M_PI * PANEL_L : 0;
 	ls->area += a;
 	ls->bad_b += fabs(B[1] - want) > 1e-3 * M_PI * PANEL_L;
 	uint32_t *seen = panel ? &ls->panel_node : &ls->other_node;

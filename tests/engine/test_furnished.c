@@ -60,6 +60,7 @@
 #include <cmocka.h>
 
 #include "generated.h"
+#include "leaf_area.h"
 #include "rad.h"
 #include "rad_reference.h"
 #include "sceneio.h"
@@ -622,7 +623,6 @@ static void test_plate_shadow_far_side(void **state)
  * photopic, rho per node (each node of the rooms below has one material).
  */
 typedef struct absorbed {
-	const rad_scene *s;
 	double rho[16][3];
 	double lm;
 } absorbed;
@@ -633,18 +633,7 @@ static void absorb_leaf(void *ud, uint32_t node, const double p[4][3], int nv,
 	absorbed *a = ud;
 	(void)radiosity;
 	assert_true(node < 16);
-	double c[3] = {0, 0, 0};
-	for (int k = 1; k + 1 < nv; k++) {
-		double u[3], v[3];
-		for (int j = 0; j < 3; j++) {
-			u[j] = p[k][j] - p[0][j];
-			v[j] = p[k + 1][j] - p[0][j];
-		}
-		c[0] += u[1] * v[2] - u[2] * v[1];
-		c[1] += u[2] * v[0] - u[0] * v[2];
-		c[2] += u[0] * v[1] - u[1] * v[0];
-	}
-	double area = 0.5 * sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]);
+	double area = leaf_area(p, nv);
 	const double w[3] = {RAD_LUMA_R, RAD_LUMA_G, RAD_LUMA_B};
 	for (int j = 0; j < 3; j++)
 		a->lm += w[j] * (1 - a->rho[node][j]) * irradiance[j] * area;
@@ -670,7 +659,7 @@ static void test_closed_rooms_keep_their_power(void **state)
 	                                          RAD_SOLVER_RMB};
 	for (int i = 0; i < 2; i++) {
 		rad_scene *s = generated_scene(kinds[i]);
-		absorbed a = {.s = s};
+		absorbed a = {0};
 		rad_scene_counts n;
 		rad_scene_counts_get(s, &n);
 		for (uint32_t k = 0; k < n.polygons; k++) {

@@ -25,6 +25,7 @@
 #include "generated.h"
 #include "sceneio.h"
 
+#include "leaf_area.h"
 #include "rad.h"
 
 /* Axis-aligned box [0,w]x[0,h]x[0,d], faces towards the inside, with
@@ -93,20 +94,6 @@ typedef struct leaf_acc {
 	double area_e; /* sum of area x photopic irradiance */
 } leaf_acc;
 
-static double tri_area(const double p[4][3], int nv)
-{
-	double a[3], b[3], c[3];
-	for (int k = 0; k < 3; k++) {
-		a[k] = p[1][k] - p[0][k];
-		b[k] = p[nv == 4 ? 3 : 2][k] - p[0][k];
-	}
-	c[0] = a[1] * b[2] - a[2] * b[1];
-	c[1] = a[2] * b[0] - a[0] * b[2];
-	c[2] = a[0] * b[1] - a[1] * b[0];
-	double l = sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]);
-	return nv == 4 ? l : 0.5 * l;
-}
-
 static void on_leaf(void *ud, uint32_t node, const double p[4][3], int nv,
                     const double B[3], const double I[3])
 {
@@ -118,7 +105,7 @@ static void on_leaf(void *ud, uint32_t node, const double p[4][3], int nv,
 	a->max_b = fmax(a->max_b, b);
 	a->min_e = fmin(a->min_e, e);
 	a->max_e = fmax(a->max_e, e);
-	a->area_e += tri_area(p, nv) * e;
+	a->area_e += leaf_area(p, nv) * e;
 }
 
 static leaf_acc leaves_of(const rad_solver *sv)
