@@ -123,19 +123,28 @@ static void reference_lux(const rad_scene *s, const double pts[][6], int n,
 	                 RAD_OK);
 }
 
+/* A converged solver of the given kind at the defaults, queried at n
+ * points: lux and error_lux (el may be NULL). */
+static void solved_lux(const rad_scene *s, rad_solver_kind kind,
+                       const double pts[][6], int n, double lux[], double el[])
+{
+	rad_solver *sv = converged_solver(s, kind);
+	rad_error err;
+	assert_true(n <= MAXPTS);
+	assert_int_equal(
+	        rad_solver_query(sv, &pts[0][0], (size_t)n, 0, lux, el, &err),
+	        RAD_OK);
+	rad_solver_free(sv);
+}
+
 /* Each point within the target plus 3 standard errors; returns the mean
  * signed relative error. */
 static double check_solver(const rad_scene *s, rad_solver_kind kind,
                            const double pts[][6], int n, const double ref[],
                            const double sd[])
 {
-	rad_solver *sv = converged_solver(s, kind);
-	rad_error err;
 	double lux[MAXPTS], el[MAXPTS];
-	assert_true(n <= MAXPTS);
-	assert_int_equal(
-	        rad_solver_query(sv, &pts[0][0], (size_t)n, 0, lux, el, &err),
-	        RAD_OK);
+	solved_lux(s, kind, pts, n, lux, el);
 	double worst = 0, mean = 0;
 	for (int i = 0; i < n; i++) {
 		double e = (lux[i] - ref[i]) / ref[i];
@@ -151,7 +160,6 @@ static double check_solver(const rad_scene *s, rad_solver_kind kind,
 	}
 	print_message("%s: worst %+.2f %%, mean %+.2f %%\n",
 	              rad_solver_kind_name(kind), 100 * worst, 100 * mean);
-	rad_solver_free(sv);
 	return mean;
 }
 
@@ -569,18 +577,12 @@ static void test_room_with_thin_luminaire(void **state)
 static double mean_abs_error(const rad_scene *s, rad_solver_kind kind,
                              const double pts[][6], int n, const double ref[])
 {
-	rad_solver *sv = converged_solver(s, kind);
-	rad_error err;
 	double lux[MAXPTS], mean = 0;
-	assert_true(n <= MAXPTS);
-	assert_int_equal(
-	        rad_solver_query(sv, &pts[0][0], (size_t)n, 0, lux, NULL, &err),
-	        RAD_OK);
+	solved_lux(s, kind, pts, n, lux, NULL);
 	for (int i = 0; i < n; i++)
 		mean += fabs(lux[i] - ref[i]) / ref[i] / n;
 	print_message("%s: mean |error| %.2f %%\n", rad_solver_kind_name(kind),
 	              100 * mean);
-	rad_solver_free(sv);
 	return mean;
 }
 
