@@ -143,7 +143,7 @@ static double covered_ff(gather *g, const rad_elem *e, const rad_patch *p,
 		open += rad_vis_segment(g->vis, g->x, &g->n, y[k], &p->n);
 	}
 	double v = tried ? (double)open / tried : rad_elem_exposed(e);
-	add_error(g, r * F * sqrt(v * (1 - v) / (tried ? tried : 1)));
+	add_error(g, query_piece_error(r * F, v, tried ? tried : 1));
 	return F * v;
 }
 

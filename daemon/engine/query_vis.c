@@ -197,14 +197,7 @@ static int trace_piece(const gather *g, const rad_patch *s, double *p,
 	return tried;
 }
 
-/*
- * The error of a traced piece of share c = w F whose rays disagree: the
- * binomial error of the fraction, c sqrt(p (1 - p) / k); c / 2 when no
- * ray could be tried.  Agreeing rays leave no error (no straight edge
- * passes between corners unseen); a large piece is checked once more all
- * the same (query_refine_pieces).
- */
-static double piece_error(double c, double p, int tried)
+double query_piece_error(double c, double p, int tried)
 {
 	if (tried == 0)
 		return c / 2;
@@ -221,7 +214,7 @@ double query_visible_ff(gather *g, const rad_patch *s, double F, double w,
 	memcpy(pc.open, open, sizeof(open));
 	if (tried == 0 || (p > 0 && p < 1)) {
 		pc.kind = PIECE_PARTIAL;
-		pc.e = piece_error(w * F, p, tried);
+		pc.e = query_piece_error(w * F, p, tried);
 	} else if (w * F > BIG_SHARE * g->tau * query_running(g)) {
 		/* Large so far (the total only grows): checked once the
 		 * total is known. */
@@ -264,7 +257,7 @@ static double split_piece(gather *g, const piece *pc)
 		g->total += c.est;
 		/* Quarters whose rays agree are settled. */
 		if (kind == PIECE_PARTIAL)
-			c.e = piece_error(pc->w * f, p, tried);
+			c.e = query_piece_error(pc->w * f, p, tried);
 		if (c.e <= 0)
 			continue;
 		if (c.depth >= VIS_DEPTH || g->nheap == VIS_HEAP) {

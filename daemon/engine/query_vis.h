@@ -14,6 +14,15 @@ void query_patch_quarters(const rad_patch *p, rad_patch q[4]);
 double query_patch_size(const rad_patch *p);
 
 /*
+ * The error of a traced piece of share c = w F whose rays disagree: the
+ * binomial error of the fraction, c sqrt(p (1 - p) / k) with k rays
+ * tried; c / 2 when none could be.  Agreeing rays leave no error (no
+ * straight edge passes between corners unseen); a large piece is checked
+ * once more all the same (query_refine_pieces).
+ */
+double query_piece_error(double c, double p, int tried);
+
+/*
  * Visible kernel of a piece of source of radiosity weight w (the top of a
  * source: a leaf, an element taken whole, an emitter), exact kernel F:
  * five rays now, fewer where memo (siblings in one quadtree, an emitter
