@@ -75,6 +75,8 @@ extern "C" {
 	X(INTERNAL, "internal", 0)           /* a bug: please report */        \
 	X(SHUTTING_DOWN, "shutting_down", 1)                                   \
 	X(IDLE_TIMEOUT, "idle_timeout", 1)                                     \
+	X(HELLO_TIMEOUT, "hello_timeout", 1)   /* no hello in time */          \
+	X(HEADER_TIMEOUT, "header_timeout", 1) /* header line too slow */      \
 	X(TOO_MANY_CONNECTIONS, "too_many_connections", 1)                     \
 	X(SLOW_CONSUMER, "slow_consumer", 1) /* output buffer overflowed */
 

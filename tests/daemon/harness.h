@@ -63,6 +63,7 @@ typedef struct dm_conn {
 	unsigned char *buf;     /* received, not yet decoded */
 	size_t len, cap;        /* bytes in buf, allocated */
 	int eof;                /* peer closed (or reset) */
+	int reset;              /* ... by a reset (ECONNRESET) */
 	json_t *events;         /* queued events (array) */
 	json_t *replies;        /* queued replies not yet claimed (array) */
 	unsigned char *payload; /* payload of the last dm_call reply */
@@ -124,6 +125,13 @@ dm_conn *dm_connect_tcp(const dm_daemon *d);
 dm_conn *dm_connect_unix(const dm_daemon *d);
 /* Connect with a small receive buffer (slow-consumer tests). */
 dm_conn *dm_connect_tcp_rcvbuf(const dm_daemon *d, int rcvbuf);
+/* From a source address of our own (127.0.0.2, ...: another peer as far
+ * as per-address limits go). */
+dm_conn *dm_connect_tcp_from(const dm_daemon *d, const char *src);
+/* A session (hello done) once the daemon has a slot for it, retrying
+ * while it refuses; NULL after timeout_ms.  src as dm_connect_tcp_from
+ * (NULL: the default source). */
+dm_conn *dm_open_when_free(const dm_daemon *d, const char *src, int timeout_ms);
 /* Connect and say hello (token may be NULL); fails unless ok. */
 dm_conn *dm_open(const dm_daemon *d, const char *token);
 void dm_close(dm_conn *c);
@@ -211,6 +219,11 @@ json_t *dm_solve_sample(dm_conn *c, const char *sample, json_t **scene);
  * malloc'ed into *body (headers into *headers if not NULL). */
 int dm_http_get(const dm_daemon *d, const char *path, char **headers,
                 char **body);
+/* The value of one series ("name" or "name{label=\"v\"}") in a /metrics
+ * body; fails the test when it is missing. */
+double dm_metrics_sample(const char *body, const char *series);
+/* GET /metrics and return that series' value. */
+double dm_metric(const dm_daemon *d, const char *series);
 
 /* -------------------------------------------------------------- files */
 /* Path of a committed sample scene (static buffer per call site). */

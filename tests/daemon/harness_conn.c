@@ -40,13 +40,20 @@ static dm_conn *conn_new(int fd, const char *what)
 	return c;
 }
 
-static dm_conn *connect_tcp(const char *host, int port, int rcvbuf)
+static dm_conn *connect_tcp(const char *host, int port, int rcvbuf,
+                            const char *src)
 {
 	int fd = socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
 	if (fd < 0)
 		dm_fail("socket: %s", strerror(errno));
 	if (rcvbuf > 0)
 		setsockopt(fd, SOL_SOCKET, SO_RCVBUF, &rcvbuf, sizeof(rcvbuf));
+	if (src) {
+		struct sockaddr_in me = {.sin_family = AF_INET};
+		if (inet_pton(AF_INET, src, &me.sin_addr) != 1 ||
+		    bind(fd, (struct sockaddr *)&me, sizeof(me)) != 0)
+			dm_fail("bind to %s: %s", src, strerror(errno));
+	}
 	struct sockaddr_in sa = {.sin_family = AF_INET,
 	                         .sin_port = htons((uint16_t)port)};
 	if (inet_pton(AF_INET, host, &sa.sin_addr) != 1)
@@ -60,12 +67,17 @@ static dm_conn *connect_tcp(const char *host, int port, int rcvbuf)
 
 dm_conn *dm_connect_tcp(const dm_daemon *d)
 {
-	return connect_tcp(d->tcp_host, d->tcp_port, 0);
+	return connect_tcp(d->tcp_host, d->tcp_port, 0, NULL);
 }
 
 dm_conn *dm_connect_tcp_rcvbuf(const dm_daemon *d, int rcvbuf)
 {
-	return connect_tcp(d->tcp_host, d->tcp_port, rcvbuf);
+	return connect_tcp(d->tcp_host, d->tcp_port, rcvbuf, NULL);
+}
+
+dm_conn *dm_connect_tcp_from(const dm_daemon *d, const char *src)
+{
+	return connect_tcp(d->tcp_host, d->tcp_port, 0, src);
 }
 
 dm_conn *dm_connect_unix(const dm_daemon *d)
@@ -174,6 +186,7 @@ static int fill(dm_conn *c, int timeout_ms)
 		return 1;
 	}
 	if (n == 0 || (errno != EAGAIN && errno != EINTR)) {
+		c->reset = n < 0 && errno == ECONNRESET;
 		c->eof = 1;
 		return -1;
 	}
@@ -469,10 +482,29 @@ json_t *dm_event(dm_conn *c, int timeout_ms)
 	}
 }
 
+dm_conn *dm_open_when_free(const dm_daemon *d, const char *src, int timeout_ms)
+{
+	double end = dm_now_ms() + timeout_ms;
+	for (;;) {
+		dm_conn *c =
+		        src ? dm_connect_tcp_from(d, src) : dm_connect_tcp(d);
+		json_t *r = dm_call_maybe(c, timeout_ms, "{s:s, s:i}", "cmd",
+		                          "hello", "version", 1);
+		int ok = r && !strcmp(dm_err_code(r), "");
+		json_decref(r);
+		if (ok)
+			return c;
+		dm_close(c);
+		if (dm_now_ms() > end)
+			return NULL;
+		dm_sleep_ms(100);
+	}
+}
+
 int dm_http_get(const dm_daemon *d, const char *path, char **headers,
                 char **body)
 {
-	dm_conn *c = connect_tcp(d->metrics_host, d->metrics_port, 0);
+	dm_conn *c = connect_tcp(d->metrics_host, d->metrics_port, 0, NULL);
 	char req[512];
 	int n = snprintf(req, sizeof(req),
 	                 "GET %s HTTP/1.1\r\nHost: %s:%d\r\nConnection: "

@@ -296,3 +296,29 @@ int dm_close_enough(double a, double b, double rel)
 	double scale = fmax(fabs(a), fabs(b));
 	return fabs(a - b) <= rel * scale + 1e-12;
 }
+
+double dm_metrics_sample(const char *body, const char *series)
+{
+	size_t n = strlen(series);
+	const char *p = body;
+	while (p && *p) {
+		if (!strncmp(p, series, n) && p[n] == ' ')
+			return strtod(p + n + 1, NULL);
+		p = strchr(p, '\n');
+		if (p)
+			p++;
+	}
+	dm_fail("/metrics: no sample %s", series);
+	return 0;
+}
+
+double dm_metric(const dm_daemon *d, const char *series)
+{
+	char *body = NULL;
+	int code = dm_http_get(d, "/metrics", NULL, &body);
+	if (code != 200)
+		dm_fail("GET /metrics: status %d", code);
+	double v = dm_metrics_sample(body, series);
+	free(body);
+	return v;
+}

@@ -295,22 +295,10 @@ static void test_too_many_connections_affects_only_the_extra(void **state)
 	/* Free a slot: a new connection gets in (the daemon may need a
 	 * moment to notice the close). */
 	dm_close(a);
-	double end = dm_now_ms() + 10000;
-	for (;;) {
-		dm_conn *n = dm_connect_tcp(d);
-		json_t *r = dm_call_maybe(n, 10000, "{s:s, s:i}", "cmd",
-		                          "hello", "version", 1);
-		int ok = r && !strcmp(dm_err_code(r), "");
-		json_decref(r);
-		if (ok) {
-			json_decref(dm_ok(n, "{s:s}", "cmd", "status"));
-			break;
-		}
-		dm_close(n);
-		if (dm_now_ms() > end)
-			fail_msg("a freed connection slot is not reusable");
-		dm_sleep_ms(100);
-	}
+	dm_conn *n = dm_open_when_free(d, NULL, 10000);
+	if (!n)
+		fail_msg("a freed connection slot is not reusable");
+	json_decref(dm_ok(n, "{s:s}", "cmd", "status"));
 	json_decref(dm_ok(b, "{s:s}", "cmd", "status"));
 	dm_pass();
 }
@@ -397,21 +385,6 @@ static const char *const families[] = {
 };
 
 /* The value of the sample "series" (name with labels); fails if absent. */
-static double sample(const char *body, const char *series)
-{
-	size_t n = strlen(series);
-	const char *p = body;
-	while (p && *p) {
-		if (!strncmp(p, series, n) && p[n] == ' ')
-			return strtod(p + n + 1, NULL);
-		p = strchr(p, '\n');
-		if (p)
-			p++;
-	}
-	fail_msg("/metrics: no sample %s", series);
-	return 0;
-}
-
 static void test_metrics_serves_prometheus_text(void **state)
 {
 	(void)state;
@@ -435,23 +408,26 @@ static void test_metrics_serves_prometheus_text(void **state)
 	for (size_t i = 0; families[i]; i++)
 		require_family(body, families[i]);
 	/* The samples agree with status. */
-	assert_true(sample(body, "luxradd_scenes") == 1);
-	assert_true(sample(body, "luxradd_connections") >= 1);
-	assert_true(sample(body, "luxradd_jobs{state=\"paused\"}") == 1);
-	assert_true(sample(body, "luxradd_jobs{state=\"done\"}") == 0);
+	assert_true(dm_metrics_sample(body, "luxradd_scenes") == 1);
+	assert_true(dm_metrics_sample(body, "luxradd_connections") >= 1);
+	assert_true(dm_metrics_sample(body, "luxradd_jobs{state=\"paused\"}") ==
+	            1);
+	assert_true(dm_metrics_sample(body, "luxradd_jobs{state=\"done\"}") ==
+	            0);
 	char series[128];
 	snprintf(series, sizeof(series), "luxradd_job_iteration{job=\"%lld\"}",
 	         (long long)json_integer_value(job));
-	assert_true(sample(body, series) == 1);
+	assert_true(dm_metrics_sample(body, series) == 1);
 	double total = 0;
 	for (int k = 0; dm_mem_kinds[k]; k++) {
 		snprintf(series, sizeof(series),
 		         "luxradd_memory_bytes{kind=\"%s\"}", dm_mem_kinds[k]);
-		total += sample(body, series);
+		total += dm_metrics_sample(body, series);
 	}
 	assert_true(total ==
 	            (double)dm_int(dm_get(st, "memory"), "total_bytes"));
-	assert_true(sample(body, "luxradd_commands_total{cmd=\"job.run\"}") ==
+	assert_true(dm_metrics_sample(
+	                    body, "luxradd_commands_total{cmd=\"job.run\"}") ==
 	            1);
 	/* Every non-comment line is "name[{labels}] value". */
 	char *save = NULL;

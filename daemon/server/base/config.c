@@ -97,6 +97,18 @@ static const cfg_key keys[] = {
          (double)TiB, "SIZE", "4G", "largest scene upload (1K..1T)"},
         {"max_connections", K_INT, F(max_connections), 1, 65536, "N", "256",
          "client connections open at once (1..65536)"},
+        {"max_connections_per_address", K_INT, F(max_connections_per_address),
+         0, 65536, "N", "8",
+         "TCP connections open at once from one IPv4 address or IPv6 /64 "
+         "(0..65536); 0 = no limit"},
+        {"hello_timeout", K_SECONDS, F(hello_timeout_s), 0, 3600, "DURATION",
+         "5s",
+         "close a connection that has not said hello this long after "
+         "connecting; 0 = never"},
+        {"header_timeout", K_SECONDS, F(header_timeout_s), 0, 3600, "DURATION",
+         "10s",
+         "close a connection whose request header is not complete this long "
+         "after its first byte; 0 = never"},
         {"max_scenes", K_INT, F(max_scenes), 1, 1000000, "N", "16",
          "scenes stored at once (1..1000000)"},
         {"max_jobs", K_INT, F(max_jobs), 1, 1000000, "N", "1024",
@@ -217,6 +229,9 @@ void srv_config_default(srv_config *c)
 	c->max_header_bytes = 4 * MiB;
 	c->max_scene_bytes = GiB;
 	c->max_connections = 64;
+	c->max_connections_per_address = 16;
+	c->hello_timeout_s = 10;
+	c->header_timeout_s = 30;
 	c->max_scenes = 64;
 	c->max_jobs = 256;
 	c->max_subscriptions = 16;

@@ -76,12 +76,47 @@ struct cmd_conn {
 	int reading;        /* EPOLLIN armed */
 	double close_at;    /* closing: give up flushing at this time */
 	double last_active; /* rad_seconds() of the last byte in or out */
+	double opened;      /* rad_seconds() at accept: the hello deadline */
+	double hdr_start;   /* first byte of a header still incomplete; 0
+	                       when none is being received */
+	unsigned char addr[16]; /* peer key for the per-address limit: an
+	                           IPv4 address or an IPv6 /64 */
+	int addr_len;           /* 4, 8, or 0 (Unix: not counted) */
 	cmd_sub *subs;
 	int nsubs, subs_cap;
 	cmd_conn *next, *prev;
 };
 
+/*
+ * Why the daemon refused or closed a connection itself, counted for
+ * /metrics: at accept (max_connections, per_address, no_descriptors), to
+ * make room (evicted: no hello yet), on a deadline, or for the closing
+ * error the peer earned (auth, protocol).  Shutdown is not counted.
+ */
+#define CMD_REFUSALS(X)                                                        \
+	X(MAX_CONNECTIONS, "max_connections")                                  \
+	X(PER_ADDRESS, "per_address")                                          \
+	X(NO_DESCRIPTORS, "no_descriptors")                                    \
+	X(EVICTED, "evicted")                                                  \
+	X(HELLO_TIMEOUT, "hello_timeout")                                      \
+	X(HEADER_TIMEOUT, "header_timeout")                                    \
+	X(IDLE_TIMEOUT, "idle_timeout")                                        \
+	X(AUTH, "auth")                                                        \
+	X(PROTOCOL, "protocol")                                                \
+	X(SLOW_CONSUMER, "slow_consumer")
+
+typedef enum cmd_refusal {
+#define CMD_REFUSAL_ENUM_(name, str) CMD_REFUSED_##name,
+	CMD_REFUSALS(CMD_REFUSAL_ENUM_)
+#undef CMD_REFUSAL_ENUM_
+	        CMD_REFUSED_COUNT
+} cmd_refusal;
+
+const char *cmd_refusal_name(cmd_refusal r);
+
 cmd_conn *cmd_conn_find(cmd_server *d, uint64_t id);
+/* The spare descriptor (cmd_server_listen); -1 when none can be had. */
+int cmd_conn_init(cmd_server *d);
 void cmd_conn_accept(cmd_server *d, int lfd, int tcp, int needs_token);
 /* Queue bytes (ownership of buf taken); flushes what the socket takes. */
 int cmd_conn_send(cmd_server *d, cmd_conn *c, unsigned char *buf, size_t len);
@@ -277,6 +312,10 @@ struct cmd_server {
 	double shutdown_flush_at;
 	uint64_t cmd_calls[RP_CMD_COUNT], cmd_errors[RP_CMD_COUNT];
 	uint64_t conns_total, events_dropped, slow_consumers;
+	uint64_t refused[CMD_REFUSED_COUNT]; /* by cause (conn.c) */
+	void *lingers; /* conn.c: refused sockets read until the peer's EOF */
+	int nlingers;
+	int spare_fd; /* conn.c: held to accept and refuse at EMFILE */
 	char addr_path[4200];
 
 	struct mb_server *mb;    /* Modbus server (NULL when off) */

@@ -21,9 +21,27 @@
  * A closing connection stops reading, flushes what is queued for at most
  * a few seconds and is then freed at the end of the loop turn (never
  * while a caller up the stack may still hold the pointer).
+ *
+ * Admission.  A slot is held from accept, so what a peer may do before
+ * it has proved anything is bounded: hello within hello_timeout of the
+ * accept, every header line complete within header_timeout of its first
+ * byte (the idle timeout alone, reset by each byte, let one byte a
+ * minute hold a slot for ever), at most max_connections_per_address
+ * connections per IPv4 address or IPv6 /64.  When every slot is taken, a
+ * new connection takes the place of the oldest one that has waited
+ * EVICT_AFTER_S without saying hello; when there is none it is refused.
+ * A refused socket gets its too_many_connections frame, then our FIN,
+ * and is read until the peer's EOF (a linger, bounded in number and
+ * time) before it is closed: closing a socket with unread input sends a
+ * reset, which the peer may see before the frame.  A spare descriptor,
+ * given up for a moment, lets the daemon accept and refuse even when the
+ * process is out of descriptors.  Every refusal and forced close is
+ * counted by cause (cmd_refusal) for /metrics.
  */
 #include <errno.h>
+#include <fcntl.h>
 #include <netdb.h>
+#include <netinet/in.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -39,6 +57,46 @@
 #define READ_BUDGET (4u << 20) /* per connection per loop turn */
 #define CLOSE_FLUSH_S 15.0     /* time a closing connection may flush */
 #define EOF_GRACE_S 60.0       /* half-closed peer awaiting a reply */
+#define EVICT_AFTER_S 1.0      /* no hello this long: may give way */
+#define LINGER_S 2.0           /* a refused socket read until EOF */
+#define LINGER_MAX 256         /* refused sockets lingering at once */
+
+static const char *const refusal_names[] = {
+#define CMD_REFUSAL_NAME_(name, str) str,
+        CMD_REFUSALS(CMD_REFUSAL_NAME_)
+#undef CMD_REFUSAL_NAME_
+};
+
+const char *cmd_refusal_name(cmd_refusal r)
+{
+	return (unsigned)r < CMD_REFUSED_COUNT ? refusal_names[r] : "?";
+}
+
+/* The refusal a closing error stands for; CMD_REFUSED_COUNT for none. */
+static cmd_refusal refusal_of(rp_err code)
+{
+	switch (code) {
+	case RP_ERR_TOO_MANY_CONNECTIONS:
+		return CMD_REFUSED_EVICTED;
+	case RP_ERR_HELLO_TIMEOUT:
+		return CMD_REFUSED_HELLO_TIMEOUT;
+	case RP_ERR_HEADER_TIMEOUT:
+		return CMD_REFUSED_HEADER_TIMEOUT;
+	case RP_ERR_IDLE_TIMEOUT:
+		return CMD_REFUSED_IDLE_TIMEOUT;
+	case RP_ERR_AUTH_REQUIRED:
+	case RP_ERR_AUTH_FAILED:
+		return CMD_REFUSED_AUTH;
+	case RP_ERR_BAD_FRAME:
+	case RP_ERR_TOO_LARGE:
+	case RP_ERR_VERSION:
+		return CMD_REFUSED_PROTOCOL;
+	case RP_ERR_SLOW_CONSUMER:
+		return CMD_REFUSED_SLOW_CONSUMER;
+	default:
+		return CMD_REFUSED_COUNT;
+	}
+}
 
 cmd_conn *cmd_conn_find(cmd_server *d, uint64_t id)
 {
@@ -64,16 +122,79 @@ void cmd_conn_update_events(cmd_server *d, cmd_conn *c)
 	                         (want_out ? EL_WRITABLE : 0u)) != 0)
 		srv_warn("connection %llu: epoll_ctl: %s",
 		         (unsigned long long)c->id, strerror(errno));
+	/* A header's deadline does not run while we do not read it. */
+	if (reading && !c->reading && c->hdr_start > 0)
+		c->hdr_start = rad_seconds();
 	c->reading = reading;
 	c->want_out = want_out;
 }
 
-/* Refuse a connection over max_connections with a one-shot error. */
-static void refuse(int fd, int max)
+/* -------------------------------------------------------------- admission */
+
+/* A refused socket, read and discarded until the peer's EOF. */
+typedef struct lingering {
+	el_watch w; /* ud: the cmd_server */
+	double until;
+	struct lingering *next, *prev;
+} lingering;
+
+static void linger_free(cmd_server *d, lingering *g)
 {
+	if (g->prev)
+		g->prev->next = g->next;
+	else
+		d->lingers = g->next;
+	if (g->next)
+		g->next->prev = g->prev;
+	d->nlingers--;
+	el_watch_del(d->loop, &g->w);
+	close(g->w.fd);
+	free(g);
+}
+
+/* Read what is there; 1 once the peer's EOF (or an error) is seen. */
+static int discard_input(int fd)
+{
+	char buf[16384];
+	for (int i = 0; i < 16; i++) {
+		ssize_t n = read(fd, buf, sizeof(buf));
+		if (n > 0)
+			continue;
+		if (n < 0 && (errno == EAGAIN || errno == EINTR))
+			return 0;
+		return 1;
+	}
+	return 0;
+}
+
+static void linger_ready(el_loop *l, el_watch *w, unsigned events)
+{
+	cmd_server *d = w->ud;
+	lingering *g = (lingering *)((char *)w - offsetof(lingering, w));
+	(void)l;
+	(void)events;
+	if (discard_input(w->fd))
+		linger_free(d, g);
+}
+
+/*
+ * Refuse fd with a too_many_connections frame.  The frame fits in an
+ * empty socket buffer; our FIN follows it, and the socket lingers (read
+ * until EOF, LINGER_S at most) so that the peer's hello, unread, does not
+ * turn the close into a reset.  With no room to linger (or no descriptor
+ * to spare, may_linger 0) what has arrived is read before closing.
+ */
+static void refuse(cmd_server *d, int fd, cmd_refusal why, int may_linger,
+                   const char *fmt, ...)
+{
+	char msg[256];
+	va_list ap;
+	va_start(ap, fmt);
+	vsnprintf(msg, sizeof(msg), fmt, ap);
+	va_end(ap);
+	d->refused[why]++;
 	json_t *e =
-	        rp_reply_error(NULL, RP_ERR_TOO_MANY_CONNECTIONS,
-	                       "the daemon serves at most %d connections", max);
+	        rp_reply_error(NULL, RP_ERR_TOO_MANY_CONNECTIONS, "%s", msg);
 	unsigned char *buf;
 	size_t len;
 	if (e && rp_frame_encode(e, NULL, 0, &buf, &len) == 0) {
@@ -82,23 +203,107 @@ static void refuse(int fd, int max)
 		free(buf);
 	}
 	json_decref(e);
-	close(fd);
+	shutdown(fd, SHUT_WR);
+	if (discard_input(fd)) {
+		close(fd);
+		return;
+	}
+	lingering *g = may_linger && d->nlingers < LINGER_MAX
+	                       ? calloc(1, sizeof(*g))
+	                       : NULL;
+	if (!g || el_watch_add(d->loop, &g->w, fd, EL_READABLE, linger_ready,
+	                       d) != 0) {
+		free(g);
+		close(fd);
+		return;
+	}
+	g->until = rad_seconds() + LINGER_S;
+	g->next = d->lingers;
+	if (g->next)
+		((lingering *)g->next)->prev = g;
+	d->lingers = g;
+	d->nlingers++;
 }
 
-static void peer_text(int fd, int tcp, char *out, size_t len)
+static void lingers_tick(cmd_server *d, double now, int all)
 {
-	struct sockaddr_storage ss;
-	socklen_t sl = sizeof(ss);
+	lingering *g = d->lingers;
+	while (g) {
+		lingering *next = g->next;
+		if (all || now >= g->until)
+			linger_free(d, g);
+		g = next;
+	}
+}
+
+/* The per-address key: the IPv4 address (IPv4-mapped IPv6 included) or
+ * the /64 of an IPv6 address; 0 bytes for anything else. */
+static int peer_key(const struct sockaddr_storage *ss, unsigned char key[16])
+{
+	static const unsigned char v4mapped[12] = {0, 0, 0, 0, 0,    0,
+	                                           0, 0, 0, 0, 0xff, 0xff};
+	if (ss->ss_family == AF_INET) {
+		memcpy(key, &((const struct sockaddr_in *)ss)->sin_addr, 4);
+		return 4;
+	}
+	if (ss->ss_family == AF_INET6) {
+		const unsigned char *a =
+		        ((const struct sockaddr_in6 *)ss)->sin6_addr.s6_addr;
+		if (memcmp(a, v4mapped, 12) == 0) {
+			memcpy(key, a + 12, 4);
+			return 4;
+		}
+		memcpy(key, a, 8);
+		return 8;
+	}
+	return 0;
+}
+
+static void peer_text(const struct sockaddr_storage *ss, socklen_t sl, int tcp,
+                      char *out, size_t len)
+{
 	char host[64] = "?", port[16] = "?";
 	if (!tcp) {
 		snprintf(out, len, "unix");
 		return;
 	}
-	if (getpeername(fd, (struct sockaddr *)&ss, &sl) == 0)
-		getnameinfo((struct sockaddr *)&ss, sl, host, sizeof(host),
-		            port, sizeof(port),
-		            NI_NUMERICHOST | NI_NUMERICSERV);
+	getnameinfo((const struct sockaddr *)ss, sl, host, sizeof(host), port,
+	            sizeof(port), NI_NUMERICHOST | NI_NUMERICSERV);
 	snprintf(out, len, "%s:%s", host, port);
+}
+
+/* Connections open from this key. */
+static int count_from(const cmd_server *d, const unsigned char *key, int n)
+{
+	int k = 0;
+	for (const cmd_conn *c = d->conns; c; c = c->next)
+		k += !c->dead && c->addr_len == n &&
+		     memcmp(c->addr, key, n) == 0;
+	return k;
+}
+
+/*
+ * The slots in use: connections open and not closing (*live), those
+ * closing (*closing: flushing their last frame, reading until EOF), and
+ * the oldest live one that has waited EVICT_AFTER_S without hello.
+ */
+static cmd_conn *census(cmd_server *d, double now, int *live, int *closing)
+{
+	cmd_conn *old = NULL;
+	*live = *closing = 0;
+	for (cmd_conn *c = d->conns; c; c = c->next) {
+		if (c->dead)
+			continue;
+		if (c->closing) {
+			(*closing)++;
+			continue;
+		}
+		(*live)++;
+		if (!c->authed && now - c->opened >= EVICT_AFTER_S &&
+		    (!old || c->opened < old->opened))
+			old = c;
+	}
+	return old;
 }
 
 static void conn_writable(cmd_server *d, cmd_conn *c);
@@ -115,23 +320,86 @@ static void conn_ready(el_loop *l, el_watch *w, unsigned events)
 		conn_readable(d, c);
 }
 
+int cmd_conn_init(cmd_server *d)
+{
+	d->spare_fd = open("/dev/null", O_RDONLY | O_CLOEXEC);
+	return d->spare_fd >= 0 ? 0 : -1;
+}
+
+/* Out of descriptors: give up the spare to accept one peer and refuse
+ * it, so that it hears why instead of waiting in the backlog (and the
+ * listener does not stay readable for ever).  0 when one was refused. */
+static int refuse_without_descriptors(cmd_server *d, int lfd)
+{
+	if (d->spare_fd < 0)
+		return -1;
+	close(d->spare_fd);
+	int fd = accept4(lfd, NULL, NULL, SOCK_NONBLOCK | SOCK_CLOEXEC);
+	if (fd >= 0)
+		refuse(d, fd, CMD_REFUSED_NO_DESCRIPTORS, 0,
+		       "the daemon is out of file descriptors");
+	d->spare_fd = open("/dev/null", O_RDONLY | O_CLOEXEC);
+	return fd >= 0 ? 0 : -1;
+}
+
 void cmd_conn_accept(cmd_server *d, int lfd, int tcp, int needs_token)
 {
 	srv *s = &d->core;
+	const srv_config *cfg = &s->cfg;
 	for (;;) {
-		int fd = accept4(lfd, NULL, NULL, SOCK_NONBLOCK | SOCK_CLOEXEC);
+		struct sockaddr_storage ss;
+		socklen_t sl = sizeof(ss);
+		int fd = accept4(lfd, (struct sockaddr *)&ss, &sl,
+		                 SOCK_NONBLOCK | SOCK_CLOEXEC);
 		if (fd < 0) {
+			if ((errno == EMFILE || errno == ENFILE) &&
+			    refuse_without_descriptors(d, lfd) == 0) {
+				srv_warn("connection refused: out of file "
+				         "descriptors");
+				continue;
+			}
 			if (errno != EAGAIN && errno != EINTR &&
 			    errno != ECONNABORTED)
 				srv_warn("accept: %s", strerror(errno));
 			return;
 		}
-		if (d->nconns >= s->cfg.max_connections) {
-			srv_warn("connection refused: max_connections (%d) "
-			         "reached",
-			         s->cfg.max_connections);
-			refuse(fd, s->cfg.max_connections);
+		double now = rad_seconds();
+		unsigned char key[16];
+		int klen = tcp ? peer_key(&ss, key) : 0;
+		char peer[128];
+		peer_text(&ss, sl, tcp, peer, sizeof(peer));
+		if (klen && cfg->max_connections_per_address > 0 &&
+		    count_from(d, key, klen) >=
+		            cfg->max_connections_per_address) {
+			srv_warn("connection from %s refused: "
+			         "max_connections_per_address (%d) reached",
+			         peer, cfg->max_connections_per_address);
+			refuse(d, fd, CMD_REFUSED_PER_ADDRESS, 1,
+			       "this address already has %d connections open "
+			       "(max_connections_per_address)",
+			       cfg->max_connections_per_address);
 			continue;
+		}
+		int live, closing;
+		cmd_conn *old = census(d, now, &live, &closing);
+		if (live >= cfg->max_connections) {
+			/* Those closing are bounded too: each waits at most
+			 * CLOSE_FLUSH_S for its peer's EOF. */
+			if (!old || closing >= cfg->max_connections) {
+				srv_warn("connection from %s refused: "
+				         "max_connections (%d) reached",
+				         peer, cfg->max_connections);
+				refuse(d, fd, CMD_REFUSED_MAX_CONNECTIONS, 1,
+				       "the daemon serves at most %d "
+				       "connections",
+				       cfg->max_connections);
+				continue;
+			}
+			cmd_conn_send_error(
+			        d, old, NULL, RP_ERR_TOO_MANY_CONNECTIONS,
+			        "closed to make room for a new connection: no "
+			        "hello %.1f s after connecting",
+			        now - old->opened);
 		}
 		cmd_conn *c = calloc(1, sizeof(*c));
 		if (!c) {
@@ -143,8 +411,10 @@ void cmd_conn_accept(cmd_server *d, int lfd, int tcp, int needs_token)
 		c->listener_tcp = tcp;
 		c->needs_token = needs_token;
 		c->reading = 1;
-		c->last_active = rad_seconds();
-		peer_text(fd, tcp, c->peer, sizeof(c->peer));
+		c->last_active = c->opened = now;
+		memcpy(c->addr, key, (size_t)klen);
+		c->addr_len = klen;
+		snprintf(c->peer, sizeof(c->peer), "%s", peer);
 		if (el_watch_add(d->loop, &c->w, fd, EL_READABLE, conn_ready,
 		                 d) != 0) {
 			close(fd);
@@ -294,6 +564,9 @@ void cmd_conn_send_error(cmd_server *d, cmd_conn *c, json_t *id, rp_err code,
 		cmd_conn_send_json(d, c, e);
 	json_decref(e);
 	if (rp_err_closes(code)) {
+		cmd_refusal why = refusal_of(code);
+		if (why != CMD_REFUSED_COUNT)
+			d->refused[why]++;
 		srv_info("connection %llu (%s) closed: %s: %s",
 		         (unsigned long long)c->id, c->peer, rp_err_name(code),
 		         msg);
@@ -399,6 +672,11 @@ static void process(cmd_server *d, cmd_conn *c)
 		                               &f, &used, &err);
 		if (rc == RP_DECODE_NEED) {
 			c->need = frame_need(c);
+			/* The header deadline runs until the line is in. */
+			if (c->need)
+				c->hdr_start = 0;
+			else if (c->hdr_start == 0)
+				c->hdr_start = rad_seconds();
 			break;
 		}
 		if (rc == RP_DECODE_ERROR) {
@@ -407,6 +685,7 @@ static void process(cmd_server *d, cmd_conn *c)
 			break;
 		}
 		c->need = 0;
+		c->hdr_start = 0;
 		c->stolen = 0;
 		d->on_frame(d, c, &f, used);
 		json_decref(f.header);
@@ -578,8 +857,10 @@ void cmd_conn_reap(cmd_server *d)
 
 void cmd_conn_tick(cmd_server *d, double now)
 {
-	srv *s = &d->core;
-	double idle = s->cfg.idle_timeout_s;
+	const srv_config *cfg = &d->core.cfg;
+	double idle = cfg->idle_timeout_s, hello = cfg->hello_timeout_s,
+	       header = cfg->header_timeout_s;
+	lingers_tick(d, now, 0);
 	for (cmd_conn *c = d->conns; c; c = c->next) {
 		if (c->dead)
 			continue;
@@ -588,8 +869,18 @@ void cmd_conn_tick(cmd_server *d, double now)
 				c->dead = 1;
 			continue;
 		}
-		if (idle > 0 && !c->busy && !c->out_head &&
-		    now - c->last_active > idle)
+		if (hello > 0 && !c->authed && now - c->opened > hello)
+			cmd_conn_send_error(d, c, NULL, RP_ERR_HELLO_TIMEOUT,
+			                    "no hello %g s after connecting",
+			                    hello);
+		else if (header > 0 && c->hdr_start > 0 && c->reading &&
+		         now - c->hdr_start > header)
+			cmd_conn_send_error(d, c, NULL, RP_ERR_HEADER_TIMEOUT,
+			                    "a request header was not complete "
+			                    "%g s after its first byte",
+			                    header);
+		else if (idle > 0 && !c->busy && !c->out_head &&
+		         now - c->last_active > idle)
 			cmd_conn_send_error(d, c, NULL, RP_ERR_IDLE_TIMEOUT,
 			                    "nothing received or sent for %g s",
 			                    idle);
@@ -604,4 +895,8 @@ void cmd_conn_free_all(cmd_server *d)
 		conn_free(d, c);
 	}
 	d->nconns = 0;
+	lingers_tick(d, 0, 1);
+	if (d->spare_fd >= 0)
+		close(d->spare_fd);
+	d->spare_fd = -1;
 }

@@ -172,6 +172,12 @@ static json_t *limits_json(const cmd_server *d)
 	json_object_set_new(o, "idle_timeout_s", json_real(c->idle_timeout_s));
 	json_object_set_new(o, "max_connections",
 	                    json_integer(c->max_connections));
+	json_object_set_new(o, "max_connections_per_address",
+	                    json_integer(c->max_connections_per_address));
+	json_object_set_new(o, "hello_timeout_s",
+	                    json_real(c->hello_timeout_s));
+	json_object_set_new(o, "header_timeout_s",
+	                    json_real(c->header_timeout_s));
 	json_object_set_new(o, "max_scenes", json_integer(c->max_scenes));
 	json_object_set_new(o, "max_jobs", json_integer(c->max_jobs));
 	json_object_set_new(o, "max_output_bytes",

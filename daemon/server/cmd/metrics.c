@@ -90,6 +90,21 @@ static void metrics_body(cmd_server *d, sbuf *sb)
 	sb_printf(sb, "luxradd_uptime_seconds %.3f\n", rad_seconds() - s->t0);
 	gauge(sb, "luxradd_connections", "Open protocol connections.");
 	sb_printf(sb, "luxradd_connections %d\n", d->nconns);
+	int nohello = 0;
+	for (const cmd_conn *c = d->conns; c; c = c->next)
+		nohello += !c->dead && !c->closing && !c->authed;
+	gauge(sb, "luxradd_connections_without_hello",
+	      "Open protocol connections that have not said hello yet.");
+	sb_printf(sb, "luxradd_connections_without_hello %d\n", nohello);
+	sb_printf(sb, "# HELP luxradd_connections_refused_total Connections "
+	              "refused at accept or closed by the daemon, by cause.\n"
+	              "# TYPE luxradd_connections_refused_total counter\n");
+	for (int k = 0; k < CMD_REFUSED_COUNT; k++)
+		sb_printf(sb,
+		          "luxradd_connections_refused_total{cause=\"%s\"} "
+		          "%llu\n",
+		          cmd_refusal_name((cmd_refusal)k),
+		          (unsigned long long)d->refused[k]);
 	gauge(sb, "luxradd_scenes", "Scenes loaded.");
 	sb_printf(sb, "luxradd_scenes %d\n", s->nscenes);
 	gauge(sb, "luxradd_jobs", "Jobs by state.");

@@ -28,6 +28,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/file.h>
+#include <sys/resource.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
 #include <sys/un.h>
@@ -176,7 +177,7 @@ static int listen_tcp(cmd_server *d, const char *spec, int kind, char *msg,
 	if (fd < 0 ||
 	    setsockopt(fd, SOL_SOCKET, SO_REUSEADDR, &one, sizeof(one)) != 0 ||
 	    bind(fd, res->ai_addr, res->ai_addrlen) != 0 ||
-	    listen(fd, 128) != 0 || set_nonblock(fd) != 0) {
+	    listen(fd, SOMAXCONN) != 0 || set_nonblock(fd) != 0) {
 		snprintf(msg, msglen, "%s '%s': cannot listen: %s", what, spec,
 		         strerror(errno));
 		if (fd >= 0)
@@ -225,7 +226,7 @@ static int listen_unix(cmd_server *d, const char *path, char *msg,
 	unlink(path);
 	fd = socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
 	if (fd < 0 || bind(fd, (struct sockaddr *)&sa, sizeof(sa)) != 0 ||
-	    chmod(path, 0660) != 0 || listen(fd, 128) != 0 ||
+	    chmod(path, 0660) != 0 || listen(fd, SOMAXCONN) != 0 ||
 	    set_nonblock(fd) != 0) {
 		snprintf(msg, msglen, "listen_unix '%s': %s", path,
 		         strerror(errno));
@@ -267,10 +268,43 @@ static int write_addr_file(cmd_server *d, char *msg, size_t msglen)
 	return 0;
 }
 
+/*
+ * Descriptors: raise the soft limit to the hard one (a connection, a
+ * linger or a query's file each hold one), say when max_connections
+ * cannot be met, and keep a spare for refusing at EMFILE (conn.c).
+ */
+static void descriptors(cmd_server *d)
+{
+	const srv_config *c = &d->core.cfg;
+	struct rlimit rl;
+	if (getrlimit(RLIMIT_NOFILE, &rl) == 0) {
+		if (rl.rlim_cur < rl.rlim_max) {
+			rlim_t was = rl.rlim_cur;
+			rl.rlim_cur = rl.rlim_max;
+			if (setrlimit(RLIMIT_NOFILE, &rl) != 0)
+				rl.rlim_cur = was;
+		}
+		/* room for the data directory, Modbus and the store */
+		rlim_t want = (rlim_t)c->max_connections * 2 + 64;
+		if (rl.rlim_cur != RLIM_INFINITY && rl.rlim_cur < want)
+			srv_warn("open files limited to %llu: fewer than "
+			         "max_connections (%d) need; raise the limit "
+			         "(LimitNOFILE=, ulimit -n) or lower "
+			         "max_connections",
+			         (unsigned long long)rl.rlim_cur,
+			         c->max_connections);
+	}
+	if (cmd_conn_init(d) != 0)
+		srv_warn("no spare descriptor: %s; out of descriptors, new "
+		         "connections will wait unanswered",
+		         strerror(errno));
+}
+
 int cmd_server_listen(cmd_server *d, char *msg, size_t msglen)
 {
 	srv *s = &d->core;
 	const srv_config *c = &s->cfg;
+	descriptors(d);
 	if (c->listen_tcp[0] && listen_tcp(d, c->listen_tcp, 0, msg, msglen))
 		return -1;
 	for (int i = 0; i < d->nlis; i++) {
@@ -404,6 +438,7 @@ int cmd_server_init(cmd_server *d, const srv_config *cfg, int argc, char **argv,
 
 	memset(d, 0, sizeof(*d));
 	d->core.lock_fd = -1;
+	d->spare_fd = -1;
 	d->argc = argc;
 	d->argv = argv;
 	d->next_conn_id = 1;
