@@ -25,6 +25,7 @@
 #include <string.h>
 #include <unistd.h>
 
+#include "bench_stats.h"
 #include "harness.h"
 
 typedef struct bench_args {
@@ -58,34 +59,6 @@ static void usage(FILE *f)
 	        "  --subscribers N    subscribers for (c) [50]\n"
 	        "  --json             one JSON object on stdout\n"
 	        "Times in seconds; no pass/fail on speed.\n");
-}
-
-static int cmp_double(const void *a, const void *b)
-{
-	double x = *(const double *)a, y = *(const double *)b;
-	return x < y ? -1 : x > y;
-}
-
-/* Percentile (0..100) of n values, nearest rank; sorts v. */
-static double pct(double *v, int n, double p)
-{
-	qsort(v, (size_t)n, sizeof(double), cmp_double);
-	int k = (int)ceil(p / 100.0 * n) - 1;
-	if (k < 0)
-		k = 0;
-	if (k >= n)
-		k = n - 1;
-	return v[k];
-}
-
-static double median(const double *v, int n)
-{
-	double *c = malloc((size_t)n * sizeof(double));
-	memcpy(c, v, (size_t)n * sizeof(double));
-	qsort(c, (size_t)n, sizeof(double), cmp_double);
-	double m = n % 2 ? c[n / 2] : 0.5 * (c[n / 2 - 1] + c[n / 2]);
-	free(c);
-	return m;
 }
 
 static json_t *job_options(const bench_args *a)
@@ -339,8 +312,8 @@ static void bench_queries(dm_conn *c, const json_t *scene,
 			        json_array_size(dm_get(r, "lux")));
 		json_decref(r);
 	}
-	*p50 = pct(ms, a->queries, 50);
-	*p99 = pct(ms, a->queries, 99);
+	*p50 = bench_pct(ms, a->queries, 50);
+	*p99 = bench_pct(ms, a->queries, 99);
 	free(ms);
 	json_decref(pts);
 	json_decref(dm_ok(c, "{s:s, s:O}", "cmd", "job.delete", "job", job));
@@ -395,8 +368,8 @@ int main(int argc, char **argv)
 		        "luxrad-solve %.3f s (process %.3f s)\n",
 		        i + 1, dw[i], de[i], cs[i], cw[i]);
 	}
-	double m_dw = median(dw, n), m_de = median(de, n), m_cs = median(cs, n),
-	       m_cw = median(cw, n);
+	double m_dw = bench_median(dw, n), m_de = bench_median(de, n),
+	       m_cs = bench_median(cs, n), m_cw = bench_median(cw, n);
 
 	/* (b) query latency. */
 	double p50 = 0, p99 = 0, cli_q = 0;
@@ -419,7 +392,7 @@ int main(int argc, char **argv)
 		        "subscribers %.3f s\n",
 		        i + 1, w0[i], a.subscribers, w1[i]);
 	}
-	double m_w0 = median(w0, n), m_w1 = median(w1, n);
+	double m_w0 = bench_median(w0, n), m_w1 = bench_median(w1, n);
 
 	if (a.json) {
 		json_t *o = json_pack(

@@ -1,10 +1,21 @@
 #!/usr/bin/env bash
-# run_bench_daemon.sh -- build and run the daemon benchmark, print the
+# run_bench_daemon.sh -- build and run a daemon benchmark, print the
 # figures.
 #
 # Usage: bash tests/bench/run_bench_daemon.sh [luxrad-bench-daemon options]
 #   e.g. bash tests/bench/run_bench_daemon.sh --runs 7 --threads 2
+#        bash tests/bench/run_bench_daemon.sh load [luxrad-bench-load options]
 #
+# "load" runs luxrad-bench-load instead (tests/bench/bench_load.c): three
+# phases on fresh daemons while two jobs solve the generated hall -- one
+# status client (quiet), 900 well-behaved clients, and the same with 100
+# hostile connections -- and prints status latency p50/p99, the jobs'
+# solve times and their ratios to the quiet phase, the daemon's refusals
+# by cause and whether anything was lost (exit 1 if so); its JSON is kept
+# in tests/bench/out/bench_load.json.  The load generator shares the
+# daemon's cores.
+#
+# Without "load":
 # Builds luxradd, luxrad-solve, luxrad-scenegen and luxrad-bench-daemon in
 # build/ (the release build; $LUXRAD_BUILD_DIR overrides), then runs the
 # benchmark once: (a) solve time
@@ -21,12 +32,22 @@ ROOT=$(pwd)
 BUILD="${LUXRAD_BUILD_DIR:-$ROOT/build}"
 OUT="$ROOT/tests/bench/out"
 
+BENCH=daemon
+if [[ ${1:-} == load ]]; then
+	BENCH=load
+	shift
+fi
 cmake -S "$ROOT" -B "$BUILD" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
 	-DLUXRAD_WERROR=ON -DLUXRAD_SANITIZE= >/dev/null
 cmake --build "$BUILD" -j 2 --target luxradd luxrad-solve luxrad-scenegen \
-	luxrad-bench-daemon >/dev/null
+	"luxrad-bench-$BENCH" >/dev/null
 
 mkdir -p "$OUT"
+if [[ $BENCH == load ]]; then
+	exec "$BUILD/tests/daemon/luxrad-bench-load" \
+		--json-out "$OUT/bench_load.json" "$@"
+fi
+
 "$BUILD/tests/daemon/luxrad-bench-daemon" --json "$@" >"$OUT/bench_daemon.json"
 
 /usr/bin/python3 - "$OUT/bench_daemon.json" <<'PY'
