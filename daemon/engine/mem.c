@@ -46,8 +46,46 @@ void rad_mem_report_add(const rad_mem *m, rad_mem_report *r)
 	r->peak_work += atomic_load(&m->peak_work);
 }
 
+/* The process-wide limit (rad.h): every count adds to process_bytes. */
+static _Atomic int64_t limit_bytes = 0;
+static _Atomic int64_t process_bytes = 0;
+static _Atomic uint64_t limit_refusals = 0;
+
+void rad_mem_set_limit(int64_t bytes)
+{
+	atomic_store(&limit_bytes, bytes > 0 ? bytes : 0);
+}
+
+int64_t rad_mem_limit(void)
+{
+	return atomic_load(&limit_bytes);
+}
+
+int64_t rad_mem_process_bytes(void)
+{
+	return atomic_load(&process_bytes);
+}
+
+uint64_t rad_mem_limit_refusals(void)
+{
+	return atomic_load(&limit_refusals);
+}
+
+int rad_mem_over_limit(size_t size)
+{
+	int64_t lim = atomic_load_explicit(&limit_bytes, memory_order_relaxed);
+	if (lim <= 0 ||
+	    atomic_load_explicit(&process_bytes, memory_order_relaxed) +
+	                    (int64_t)size <=
+	            lim)
+		return 0;
+	atomic_fetch_add(&limit_refusals, 1);
+	return 1;
+}
+
 void rad_mem_count(rad_mem *m, rad_mem_kind kind, int64_t delta)
 {
+	atomic_fetch_add_explicit(&process_bytes, delta, memory_order_relaxed);
 	atomic_fetch_add(&m->bytes[kind], delta);
 	int64_t t = atomic_fetch_add(&m->total, delta) + delta;
 	int64_t p = atomic_load(&m->peak);
@@ -68,20 +106,21 @@ void rad_mem_inject_failure(int64_t n)
 	atomic_store(&fail_countdown, n);
 }
 
-/* 1 if this allocation must fail (see rad_mem_inject_failure). */
-static int inject_failure(rad_mem *m)
+/* 1 if this allocation must fail: injected (rad_mem_inject_failure) or
+ * refused by the process-wide limit. */
+static int must_fail(size_t size)
 {
-	(void)m;
 	int64_t n = atomic_load(&fail_countdown);
 	while (n > 0 &&
 	       !atomic_compare_exchange_weak(&fail_countdown, &n, n - 1))
 		;
-	return n == 0;
+	return n == 0 || rad_mem_over_limit(size);
 }
 
 void *rad_mem_alloc(rad_mem *m, rad_mem_kind kind, size_t size)
 {
-	if (inject_failure(m))
+	(void)m;
+	if (must_fail(size))
 		return NULL;
 	void *p = malloc(size ? size : 1);
 	if (p)
@@ -93,7 +132,8 @@ void *rad_mem_calloc(rad_mem *m, rad_mem_kind kind, size_t n, size_t size)
 {
 	if (size && n > SIZE_MAX / size)
 		return NULL;
-	if (inject_failure(m))
+	(void)m;
+	if (must_fail(n * size))
 		return NULL;
 	void *p = calloc(n ? n : 1, size ? size : 1);
 	if (p)
@@ -105,9 +145,9 @@ void *rad_mem_realloc(rad_mem *m, rad_mem_kind kind, void *p, size_t size)
 {
 	if (!p)
 		return rad_mem_alloc(m, kind, size);
-	if (inject_failure(m))
-		return NULL;
 	int64_t before = (int64_t)malloc_usable_size(p);
+	if (must_fail(size > (size_t)before ? size - (size_t)before : 0))
+		return NULL;
 	void *q = realloc(p, size ? size : 1);
 	if (!q)
 		return NULL;

@@ -48,6 +48,10 @@ void rad_mem_init(rad_mem *m);
 void rad_mem_report_add(const rad_mem *m, rad_mem_report *r);
 void rad_mem_report_clear(rad_mem_report *r);
 
+/* 1 if allocating size more bytes would pass the process-wide limit
+ * (rad_mem_set_limit); counts the refusal. */
+int rad_mem_over_limit(size_t size);
+
 /* Count bytes allocated outside malloc (Embree's monitor); may be < 0. */
 void rad_mem_count(rad_mem *m, rad_mem_kind kind, int64_t delta);
 

@@ -151,6 +151,12 @@ void rad_solver_stats(const rad_solver *sv, rad_stats *out)
 	rad_mem_report_add(&sv->scene->mem, &out->mem);
 }
 
+void rad_solver_memory(const rad_solver *sv, rad_mem_report *out)
+{
+	rad_mem_report_clear(out);
+	rad_mem_report_add(&sv->mem, out);
+}
+
 void rad_solver_free(rad_solver *sv)
 {
 	if (!sv)

@@ -52,6 +52,7 @@ struct rad_vis {
 	const uint32_t *twin; /* the scene's back faces (scene.h), or NULL */
 	double eps;           /* trimming distance, metres */
 	char embree_msg[200]; /* last message of the error callback */
+	enum RTCError embree_code; /* first code of the error callback */
 };
 
 /* Embree reads the last vertex with a 16-byte load: pad 4 floats. */
@@ -65,7 +66,10 @@ struct rad_vis {
  */
 static bool monitor_cb(void *ud, ssize_t bytes, bool post)
 {
-	(void)post;
+	/* An allocation refused here is not made (and not counted):
+	 * Embree reports RTC_ERROR_OUT_OF_MEMORY. */
+	if (bytes > 0 && !post && rad_mem_over_limit((size_t)bytes))
+		return false;
 	rad_mem_count(ud, RAD_MEM_BVH, (int64_t)bytes);
 	return true;
 }
@@ -73,6 +77,8 @@ static bool monitor_cb(void *ud, ssize_t bytes, bool post)
 static void error_cb(void *ud, enum RTCError code, const char *str)
 {
 	rad_vis *v = ud;
+	if (v->embree_code == RTC_ERROR_NONE)
+		v->embree_code = code;
 	snprintf(v->embree_msg, sizeof(v->embree_msg), "embree error %d: %s",
 	         (int)code, str ? str : "");
 }
@@ -157,9 +163,13 @@ static rad_status alloc_buffers(rad_vis *v, const rad_scene *s,
 	return RAD_OK;
 }
 
+/* Out of memory is RAD_ERR_NOMEM, whichever way Embree tells it (the
+ * callback has usually taken the code rtcGetDeviceError would give). */
 static rad_status embree_fail(rad_vis *v, const char *what, rad_error *err)
 {
 	enum RTCError code = rtcGetDeviceError(v->device);
+	if (v->embree_code == RTC_ERROR_OUT_OF_MEMORY)
+		code = RTC_ERROR_OUT_OF_MEMORY;
 	return rad_fail(err,
 	                code == RTC_ERROR_OUT_OF_MEMORY ? RAD_ERR_NOMEM
 	                                                : RAD_ERR_EMBREE,
@@ -172,10 +182,17 @@ static rad_status build_embree(rad_vis *v, uint32_t nverts, uint32_t ntris,
                                rad_error *err)
 {
 	v->device = rtcNewDevice(NULL);
-	if (!v->device)
-		return rad_fail(err, RAD_ERR_EMBREE,
-		                "bvh: rtcNewDevice failed (error %d)",
-		                (int)rtcGetDeviceError(NULL));
+	if (!v->device) {
+		enum RTCError code = rtcGetDeviceError(NULL);
+		return rad_fail(
+		        err,
+		        code == RTC_ERROR_OUT_OF_MEMORY ? RAD_ERR_NOMEM
+		                                        : RAD_ERR_EMBREE,
+		        "bvh: rtcNewDevice failed (embree error %d%s)",
+		        (int)code,
+		        code == RTC_ERROR_OUT_OF_MEMORY ? ": out of memory"
+		                                        : "");
+	}
 	rtcSetDeviceErrorFunction(v->device, error_cb, v);
 	rtcSetDeviceMemoryMonitorFunction(v->device, monitor_cb, v->mem);
 	RTCGeometry g = rtcNewGeometry(v->device, RTC_GEOMETRY_TYPE_TRIANGLE);

@@ -292,6 +292,132 @@ static void test_solver_alloc_failure_is_clean(void **state)
 	rad_scene_free(s);
 }
 
+/* A unit room whose six faces are cut into n x n quads; the ceiling
+ * emits.  On failure the scene is freed and the status returned. */
+static rad_status build_grid_room(int n, rad_scene **out, rad_error *err)
+{
+	rad_scene *s = NULL;
+	double rho[3] = {0.5, 0.5, 0.5}, zero[3] = {0, 0, 0};
+	double lum[3] = {100, 100, 100};
+	uint32_t wall, lamp, node;
+	rad_status st = rad_scene_new(&s, err);
+	if (!st)
+		st = rad_scene_add_material(s, rho, zero, &wall, err);
+	if (!st)
+		st = rad_scene_add_material(s, zero, lum, &lamp, err);
+	if (!st)
+		st = rad_scene_add_node(s, "room", &node, err);
+	for (int f = 0; f < 6 && !st; f++) {
+		int axis = f / 2, side = f % 2;
+		for (int i = 0; i < n && !st; i++) {
+			for (int j = 0; j < n && !st; j++) {
+				double c[4][3];
+				const double uv[4][2] = {{i, j},
+				                         {i + 1, j},
+				                         {i + 1, j + 1},
+				                         {i, j + 1}};
+				for (int k = 0; k < 4; k++) {
+					c[k][axis] = side;
+					c[k][(axis + 1) % 3] = uv[k][0] / n;
+					c[k][(axis + 2) % 3] = uv[k][1] / n;
+				}
+				/* faces inwards: reverse on the far side */
+				const int idx[2][6] = {{0, 1, 2, 0, 2, 3},
+				                       {0, 2, 1, 0, 3, 2}};
+				double t[18];
+				for (int k = 0; k < 6; k++)
+					memcpy(&t[3 * k], c[idx[side][k]],
+					       sizeof(double[3]));
+				st = rad_scene_add_triangles(
+				        s, f == 3 ? lamp : wall, node, t, 2,
+				        err);
+			}
+		}
+	}
+	if (!st)
+		st = rad_scene_commit(s, err);
+	if (st) {
+		rad_scene_free(s);
+		s = NULL;
+	}
+	*out = s;
+	return st;
+}
+
+/*
+ * The process-wide limit: under every limit from 2.5 % to 100 % of what
+ * a scene needs at its peak, the scene is either made or refused with
+ * RAD_ERR_NOMEM -- by our own allocations or by Embree's, through its
+ * memory monitor -- and a refusal leaves nothing counted.  A solver over
+ * the limit fails its step with NOMEM, and rad_solver_memory reads what
+ * a solver holds.
+ */
+static void test_limit_refuses_cleanly(void **state)
+{
+	(void)state;
+	int64_t base = rad_mem_process_bytes();
+	rad_scene *s = NULL;
+	rad_error err;
+	assert_int_equal(build_grid_room(24, &s, &err), RAD_OK);
+	rad_mem_report r;
+	rad_scene_memory(s, &r);
+	int64_t need = r.peak_total;
+	rad_scene_free(s);
+	assert_int_equal(rad_mem_process_bytes(), base);
+
+	uint64_t refused0 = rad_mem_limit_refusals();
+	int made = 0, by_embree = 0, by_us = 0;
+	for (int i = 1; i <= 40; i++) {
+		rad_mem_set_limit(base + need * i / 40);
+		rad_status st = build_grid_room(24, &s, &err);
+		rad_mem_set_limit(0);
+		if (st == RAD_OK) {
+			made++;
+			rad_scene_free(s);
+		} else if (st != RAD_ERR_NOMEM) {
+			fail_msg("limit %d/40: %s (%s), not nomem", i,
+			         rad_status_name(st), err.msg);
+		} else if (strstr(err.msg, "embree error")) {
+			by_embree++;
+		} else {
+			by_us++;
+		}
+		assert_int_equal(rad_mem_process_bytes(), base);
+	}
+	print_message("40 limits: %d scenes made, %d refused by Embree's "
+	              "monitor, %d by counted allocations\n",
+	              made, by_embree, by_us);
+	assert_true(made >= 1 && by_embree >= 1 && by_us >= 1);
+	assert_true(rad_mem_limit_refusals() > refused0);
+
+	/* A solver that would pass the limit fails, cleanly. */
+	assert_int_equal(build_grid_room(24, &s, &err), RAD_OK);
+	rad_options o;
+	rad_options_default(&o);
+	o.threads = 1;
+	rad_solver *sv = NULL;
+	assert_int_equal(rad_solver_new(s, &o, &sv, &err), RAD_OK);
+	assert_int_equal(rad_solver_step(sv, &err), RAD_OK);
+	rad_stats st;
+	rad_solver_stats(sv, &st);
+	rad_mem_report mine;
+	rad_solver_memory(sv, &mine);
+	rad_scene_memory(s, &r);
+	assert_int_equal(mine.total + r.total, st.mem.total);
+	int64_t solver_bytes = mine.total;
+	rad_solver_free(sv);
+	rad_mem_set_limit(rad_mem_process_bytes() + solver_bytes / 4);
+	rad_status rs = rad_solver_new(s, &o, &sv, &err);
+	if (rs == RAD_OK) {
+		rs = rad_solver_step(sv, &err);
+		rad_solver_free(sv);
+	}
+	rad_mem_set_limit(0);
+	assert_int_equal(rs, RAD_ERR_NOMEM);
+	rad_scene_free(s);
+	assert_int_equal(rad_mem_process_bytes(), base);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -301,6 +427,7 @@ int main(void)
 	        cmocka_unit_test(test_scene_and_solver_return_to_zero),
 	        cmocka_unit_test(test_solver_alloc_failure_is_clean),
 	        cmocka_unit_test(test_hier_invariants),
+	        cmocka_unit_test(test_limit_refuses_cleanly),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }

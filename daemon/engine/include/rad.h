@@ -110,6 +110,23 @@ typedef struct rad_mem_report {
 /* JSON-friendly name of a kind ("geometry", "links"...). */
 const char *rad_mem_kind_name(rad_mem_kind kind);
 
+/*
+ * A process-wide memory limit over every counted allocation (scenes,
+ * solvers, solutions, Embree's BVH): with a limit set, an allocation that
+ * would take the bytes counted in the process past it fails as if the
+ * allocator had no memory, and the caller gets RAD_ERR_NOMEM (Embree's
+ * allocations are refused through its memory monitor).  Threads check and
+ * count separately, so the total may pass the limit by at most one
+ * allocation per thread.  0 = no limit (the default).  The daemon's
+ * memory_limit is this.
+ */
+void rad_mem_set_limit(int64_t bytes);
+int64_t rad_mem_limit(void);
+/* Bytes counted in the process now (every rad_mem added up). */
+int64_t rad_mem_process_bytes(void);
+/* Allocations the limit has refused since the process started. */
+uint64_t rad_mem_limit_refusals(void);
+
 /* ------------------------------------------------------------------ scene */
 
 typedef struct rad_scene rad_scene;
@@ -651,6 +668,14 @@ rad_status rad_solver_converge(rad_solver *sv, double tol, uint32_t max_iter,
 rad_status rad_solver_set_eps(rad_solver *sv, double eps, rad_error *err);
 
 void rad_solver_stats(const rad_solver *sv, rad_stats *out);
+
+/*
+ * What the solver itself holds now, by kind (its scene's memory left
+ * out).  Unlike rad_solver_stats this may be called from any thread while
+ * another steps the solver: it reads the counters the solver's
+ * allocations update, so a long iteration's growth is seen as it happens.
+ */
+void rad_solver_memory(const rad_solver *sv, rad_mem_report *out);
 
 /*
  * Illuminance in lux at n points.  pts holds 6 doubles per point
