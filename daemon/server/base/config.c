@@ -120,6 +120,11 @@ static const cfg_key keys[] = {
         {"idle_timeout", K_SECONDS, F(idle_timeout_s), 0, 31536000, "DURATION",
          "30m",
          "close connections silent this long; 0 = never (s, m, h suffixes)"},
+        {"memory_limit", K_SIZE, F(memory_limit), 0, (double)(1024 * TiB),
+         "SIZE", "12G",
+         "engine memory of every scene, job and solution together; an "
+         "allocation past it fails that upload or job with nomem; 0 = 3/4 "
+         "of the machine's (or the cgroup's) memory"},
         {"max_output_bytes", K_SIZE, F(max_output_bytes), (double)KiB,
          (double)TiB, "SIZE", "64M",
          "send buffer per connection before events are dropped (1K..1T)"},
@@ -238,6 +243,7 @@ void srv_config_default(srv_config *c)
 	c->max_points = 1000000;
 	c->idle_timeout_s = 600;
 	c->max_output_bytes = 8 * MiB;
+	c->memory_limit = 0;
 	c->checkpoint_interval_s = 30;
 	mb_config_default(&c->modbus);
 }

@@ -62,6 +62,8 @@ typedef struct srv_config {
 	                            default 600; 0 = never */
 	size_t max_output_bytes; /* per-connection send buffer before the
 	                            drop policy applies; default 8 MiB */
+	size_t memory_limit;     /* engine bytes, daemon-wide; 0 = 3/4
+	                            of RAM or of the cgroup's limit */
 	double checkpoint_interval_s; /* default 30 */
 	mb_config modbus;    /* the modbus_* keys (modbus.h, MODBUS.md) */
 	int listen_unix_set; /* listen_unix fixed (given in the file or a

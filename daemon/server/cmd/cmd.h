@@ -173,6 +173,9 @@ typedef cmd_result (*cmd_fn)(cmd_req *r);
 /* reply.c: what handlers share.  Fill r->err and return CMD_ERROR. */
 cmd_result cmd_req_fail(cmd_req *r, rp_err code, const char *fmt, ...)
         __attribute__((format(printf, 3, 4)));
+/* Fail r with nomem when the daemon's memory limit is reached (no new
+ * upload, job or run while it is): 1 if it did. */
+int cmd_req_memory_full(cmd_req *r);
 /* Send a reply owed to a connection that may be gone (I/O thread):
  * reply is stolen; unbusies the connection. */
 void cmd_reply_deferred(cmd_server *d, uint64_t conn_id, json_t *reply);

@@ -182,6 +182,7 @@ static json_t *limits_json(const cmd_server *d)
 	json_object_set_new(o, "max_jobs", json_integer(c->max_jobs));
 	json_object_set_new(o, "max_output_bytes",
 	                    json_integer((json_int_t)c->max_output_bytes));
+	json_object_set_new(o, "memory_limit", json_integer(s->mem_limit));
 	return o;
 }
 

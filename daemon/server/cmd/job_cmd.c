@@ -102,6 +102,8 @@ cmd_result cmd_job_create(cmd_req *r)
 		                    "max_jobs (%d) jobs exist (all states "
 		                    "count): delete one first",
 		                    s->cfg.max_jobs);
+	if (cmd_req_memory_full(r))
+		return CMD_ERROR;
 	create_task *c = calloc(1, sizeof(*c));
 	srv_job *j = c ? srv_job_alloc(s, sc) : NULL;
 	if (!j) {
@@ -266,6 +268,11 @@ cmd_result cmd_job_run(cmd_req *r)
 		return CMD_ERROR;
 	if (!lock_live(r, j, "", ": nothing to run"))
 		return CMD_ERROR;
+	if (!j->on_worker && srv_memory_full(r->s, NULL, 0)) {
+		pthread_mutex_unlock(&j->mu);
+		cmd_req_memory_full(r);
+		return CMD_ERROR;
+	}
 	srv_job_state st = j->state;
 	if (t.mode == JOB_MODE_ITERATIONS) {
 		uint64_t until = (uint64_t)j->iteration + t.n;
@@ -345,6 +352,11 @@ cmd_result cmd_job_resume(cmd_req *r)
 		return cmd_req_fail(r, RP_ERR_STATE, "job %llu (%s) %s",
 		                    (unsigned long long)j->id,
 		                    srv_job_state_name(st), why);
+	}
+	if (srv_memory_full(r->s, NULL, 0)) {
+		pthread_mutex_unlock(&j->mu);
+		cmd_req_memory_full(r);
+		return CMD_ERROR;
 	}
 	srv_job_enqueue_locked(r->s, j);
 	pthread_mutex_unlock(&j->mu);

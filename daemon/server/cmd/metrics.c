@@ -118,6 +118,16 @@ static void metrics_body(cmd_server *d, sbuf *sb)
 		sb_printf(sb, "luxradd_memory_bytes{kind=\"%s\"} %lld\n",
 		          rad_mem_kind_name((rad_mem_kind)k),
 		          (long long)sum.by_kind[k]);
+	gauge(sb, "luxradd_memory_limit_bytes",
+	      "The engine's memory limit (memory_limit, resolved).");
+	sb_printf(sb, "luxradd_memory_limit_bytes %lld\n",
+	          (long long)s->mem_limit);
+	sb_printf(sb,
+	          "# HELP luxradd_memory_limit_refusals_total Engine "
+	          "allocations refused by the memory limit.\n"
+	          "# TYPE luxradd_memory_limit_refusals_total counter\n"
+	          "luxradd_memory_limit_refusals_total %llu\n",
+	          (unsigned long long)rad_mem_limit_refusals());
 	sb_printf(sb,
 	          "# HELP luxradd_events_dropped_total Progress events "
 	          "dropped for slow subscribers.\n"

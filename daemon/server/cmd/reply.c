@@ -112,3 +112,12 @@ void cmd_task_reply(srv *s, srv_task *t, json_t *reply)
 	json_decref(t->id);
 	free(t);
 }
+
+int cmd_req_memory_full(cmd_req *r)
+{
+	char why[320];
+	if (!srv_memory_full(r->s, why, sizeof(why)))
+		return 0;
+	cmd_req_fail(r, RP_ERR_NOMEM, "%s", why);
+	return 1;
+}

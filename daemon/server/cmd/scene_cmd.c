@@ -33,11 +33,14 @@ static void upload_run(srv *s, srv_task *t)
 {
 	upload_task *u = (upload_task *)t;
 	rad_error err = {0};
+	uint64_t refusals = rad_mem_limit_refusals();
 
 	int rc = srv_scene_create(s, u->name, u->payload, u->len, &u->sc, &err);
 	if (rc == -1) {
 		u->code = cmd_err_from_rad(err.code);
 		snprintf(u->msg, sizeof(u->msg), "scene refused: %s", err.msg);
+		if (err.code == RAD_ERR_NOMEM)
+			srv_memory_note(s, refusals, u->msg, sizeof(u->msg));
 	} else if (rc != 0) {
 		u->code = RP_ERR_IO;
 		snprintf(u->msg, sizeof(u->msg), "cannot store the scene: %s",
@@ -84,6 +87,8 @@ cmd_result cmd_scene_upload(cmd_req *r)
 		                    "max_scenes (%d) scenes exist: delete one "
 		                    "first",
 		                    s->cfg.max_scenes);
+	if (cmd_req_memory_full(r))
+		return CMD_ERROR;
 	upload_task *u = calloc(1, sizeof(*u));
 	if (!u)
 		return cmd_req_fail(r, RP_ERR_NOMEM, "out of memory");

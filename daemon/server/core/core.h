@@ -428,8 +428,9 @@ struct srv {
 	srv_pool query_pool; /* queries and exports */
 	srv_pool store_pool; /* uploads, job rows: one thread, in order */
 
-	atomic_int stopping;           /* workers: checkpoint and stop */
-	atomic_llong sol_bytes;        /* live published solutions */
+	atomic_int stopping;    /* workers: checkpoint and stop */
+	atomic_llong sol_bytes; /* live published solutions */
+	int64_t mem_limit;      /* the engine's limit in force (memory.c) */
 	atomic_llong ckpt_interval_ms; /* checkpoint_interval_s */
 
 	struct {
@@ -452,6 +453,16 @@ int srv_core_init(srv *s, const srv_config *cfg, el_loop *loop, char *msg,
 int srv_core_start(srv *s, char *msg, size_t msglen);
 /* New config (SIGHUP): take what can change while running. */
 void srv_core_reconfigure(srv *s, const srv_config *cfg);
+
+/* memory.c: the engine's memory limit from cfg.memory_limit (0: 3/4 of
+ * the machine's or the cgroup's memory); at start and on reload. */
+void srv_memory_limit_apply(srv *s);
+/* 1 with why filled when the limit is reached: no new work. */
+int srv_memory_full(const srv *s, char *why, size_t len);
+/* Append to msg that the limit refused an allocation, if it did since
+ * rad_mem_limit_refusals() read refusals_before. */
+void srv_memory_note(const srv *s, uint64_t refusals_before, char *msg,
+                     size_t len);
 /*
  * Shutting down: the first call asks the workers to checkpoint and stop;
  * returns 1 once they have, the pools have finished their tasks and the

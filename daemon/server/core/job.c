@@ -333,8 +333,12 @@ static int build_solver(srv_job *j, rad_error *err)
 	o.progress = on_progress;
 	o.progress_ud = j;
 	o.cancel = &j->cancel;
-	if (rad_solver_new(j->scene->scene, &o, &j->solver, err) != RAD_OK)
+	rad_solver *sv = NULL;
+	if (rad_solver_new(j->scene->scene, &o, &sv, err) != RAD_OK)
 		return -1;
+	pthread_mutex_lock(&j->mu); /* the I/O thread reads its memory */
+	j->solver = sv;
+	pthread_mutex_unlock(&j->mu);
 	j->solver_iter = 0;
 	j->eps_applied = 0;
 	return 0;
@@ -379,15 +383,15 @@ static void finish(srv *s, srv_job *j, srv_job_state st, const char *error)
 		srv_sol_ref(sol);
 	else
 		sol = NULL;
+	rad_solver *drop = NULL;
 	if (srv_job_terminal(st)) {
 		memset(j->solver_mem, 0, sizeof(j->solver_mem));
 		j->target.complete = 1;
-	}
-	pthread_mutex_unlock(&j->mu);
-	if (srv_job_terminal(st)) {
-		rad_solver_free(j->solver);
+		drop = j->solver;
 		j->solver = NULL;
 	}
+	pthread_mutex_unlock(&j->mu);
+	rad_solver_free(drop);
 	if (srv_job_persist(s, j, sol, (int)st, msg, sizeof(msg)) != 0)
 		srv_error("job %llu: cannot record state %s: %s",
 		          (unsigned long long)j->id, srv_job_state_name(st),
@@ -485,6 +489,7 @@ static void run_job(srv *s, srv_job *j)
 {
 	rad_error err = {0};
 	job_action a;
+	uint64_t refusals = rad_mem_limit_refusals();
 
 	j->last_ckpt = rad_seconds();
 	pthread_mutex_lock(&j->mu);
@@ -516,16 +521,22 @@ static void run_job(srv *s, srv_job *j)
 		if (rad_seconds() - j->last_ckpt >= iv)
 			checkpoint(s, j);
 	}
-	if (a == ACT_FAIL)
+	if (a == ACT_FAIL) {
+		if (err.code == RAD_ERR_NOMEM)
+			srv_memory_note(s, refusals, err.msg, sizeof(err.msg));
 		finish(s, j, SRV_JOB_FAILED, err.msg);
-	else
+	} else
 		finish(s, j, action_state(a), NULL);
 }
 
 /* ---------------------------------------------------------------- workers */
 
-/* Timer: raise the cancel flag of jobs past their time budget (the
- * progress callback does it too, but some phases report no progress). */
+/*
+ * Timer: raise the cancel flag of jobs past their time budget (the
+ * progress callback does it too, but some phases report no progress),
+ * and read a stepping solver's memory as it grows: job.info, status and
+ * /metrics show it within BUDGET_TICK_S, not at the iteration's end.
+ */
 static double budget_tick(el_loop *l, void *ud, double now)
 {
 	srv *s = ud;
@@ -535,6 +546,13 @@ static double budget_tick(el_loop *l, void *ud, double now)
 		if (j->on_worker && j->deadline > 0 && now >= j->deadline &&
 		    !j->replaying)
 			srv_job_raise_cancel_locked(j);
+		if (j->on_worker && j->solver) {
+			rad_mem_report m;
+			rad_solver_memory(j->solver, &m);
+			for (int k = 0; k < RAD_MEM_NKINDS; k++)
+				j->solver_mem[k] =
+				        m.bytes[k] > 0 ? m.bytes[k] : 0;
+		}
 		pthread_mutex_unlock(&j->mu);
 	}
 	return BUDGET_TICK_S;

@@ -123,6 +123,7 @@ int srv_core_init(srv *s, const srv_config *cfg, el_loop *loop, char *msg,
 	pthread_cond_init(&s->runq_cv, NULL);
 	atomic_store(&s->ckpt_interval_ms,
 	             (long long)(cfg->checkpoint_interval_s * 1000.0));
+	srv_memory_limit_apply(s);
 
 	long cores = sysconf(_SC_NPROCESSORS_ONLN);
 	int w = cfg->workers > 0 ? cfg->workers : 1;
@@ -166,6 +167,7 @@ int srv_core_start(srv *s, char *msg, size_t msglen)
 void srv_core_reconfigure(srv *s, const srv_config *cfg)
 {
 	s->cfg = *cfg;
+	srv_memory_limit_apply(s);
 	atomic_store(&s->ckpt_interval_ms,
 	             (long long)(cfg->checkpoint_interval_s * 1000.0));
 }
