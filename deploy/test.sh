@@ -26,7 +26,7 @@ TIMEOUT=${LUXRAD_TEST_TIMEOUT:-900}
 # TSan's slowdown their solves outlast the tests' deadlines (they run in
 # the other two stages).
 TSAN_TESTS='threads|direct|mem|cli|reference|store|config|daemon_session'
-TSAN_TESTS+='|daemon_badinput|daemon_admission|daemon_query|mb_'
+TSAN_TESTS+='|daemon_badinput|daemon_admission|daemon_memory|daemon_query|mb_'
 JOBS=2
 
 declare -a VERDICT=()
