@@ -55,12 +55,34 @@ rp_err rp_err_parse(const char *name)
 static const struct {
 	const char *name;
 	int payload;
+	rp_role role;
 	const char *help;
 } cmd_table[RP_CMD_COUNT] = {
-#define RP_CMD_ROW_(name, str, payload, help) {str, payload, help},
+#define RP_CMD_ROW_(name, str, payload, role, help)                            \
+	{str, payload, RP_ROLE_##role, help},
         RP_COMMANDS(RP_CMD_ROW_)
 #undef RP_CMD_ROW_
 };
+
+static const char *const role_names[] = {"none", "read", "submit", "admin"};
+
+const char *rp_role_name(rp_role r)
+{
+	return (unsigned)r <= RP_ROLE_ADMIN ? role_names[r] : "?";
+}
+
+int rp_role_parse(const char *name)
+{
+	for (int r = RP_ROLE_READ; r <= RP_ROLE_ADMIN; r++)
+		if (name && strcmp(name, role_names[r]) == 0)
+			return r;
+	return -1;
+}
+
+rp_role rp_cmd_role(rp_cmd c)
+{
+	return (unsigned)c < RP_CMD_COUNT ? cmd_table[c].role : RP_ROLE_ADMIN;
+}
 
 const char *rp_cmd_name(rp_cmd c)
 {

@@ -66,6 +66,7 @@ extern "C" {
 	X(AUTH_REQUIRED, "auth_required", 1) /* request before hello */        \
 	X(AUTH_FAILED, "auth_failed", 1)     /* wrong or missing token */      \
 	X(NOT_FOUND, "not_found", 0)         /* no such scene / job */         \
+	X(FORBIDDEN, "forbidden", 0)         /* the token's role may not */    \
 	X(STATE, "state", 0)                 /* not allowed in this state */   \
 	X(BUSY, "busy", 0)                   /* scene still used by jobs */    \
 	X(LIMIT, "limit", 0)                 /* jobs, scenes, subscriptions */ \
@@ -101,44 +102,73 @@ typedef struct rp_error {
 /* --------------------------------------------------------- command table */
 /*
  * Every request, listed once: wire name, whether a payload may follow the
- * header ("bytes"), and a one-line summary (used by --help and docs).
- * The daemon dispatches on rp_cmd; the arguments of each are specified in
- * PROTOCOL.md and validated with the rp_arg_* getters below.
+ * header ("bytes"), the least role that may send it (rp_role), and a
+ * one-line summary (used by --help and docs).  The daemon dispatches on
+ * rp_cmd; the arguments of each are specified in PROTOCOL.md and
+ * validated with the rp_arg_* getters below.
  */
 #define RP_COMMANDS(X)                                                         \
-	X(HELLO, "hello", 0, "open the session: version, token")               \
-	X(STATUS, "status", 0, "daemon memory, jobs by state, uptime")         \
-	X(SHUTDOWN, "shutdown", 0, "checkpoint every job and stop the daemon") \
-	X(SCENE_UPLOAD, "scene.upload", 1, "upload glTF/GLB bytes as a scene") \
-	X(SCENE_LIST, "scene.list", 0, "list scenes")                          \
-	X(SCENE_INFO, "scene.info", 0, "one scene: counts, memory, jobs")      \
-	X(SCENE_DELETE, "scene.delete", 0, "free a scene no job uses")         \
-	X(JOB_CREATE, "job.create", 0, "a solve job: scene, solver, options")  \
-	X(JOB_LIST, "job.list", 0, "list jobs")                                \
-	X(JOB_INFO, "job.info", 0, "one job: state, options, latest stats")    \
-	X(JOB_RUN, "job.run", 0, "step N / to convergence / for a budget")     \
-	X(JOB_PAUSE, "job.pause", 0, "pause after the current iteration")      \
-	X(JOB_RESUME, "job.resume", 0, "resume a paused job")                  \
-	X(JOB_CANCEL, "job.cancel", 0, "cancel (stops within an iteration)")   \
-	X(JOB_SET, "job.set", 0, "change eps between iterations")              \
-	X(JOB_DELETE, "job.delete", 0, "forget a finished job")                \
-	X(SUBSCRIBE, "subscribe", 0, "stream a job's events")                  \
-	X(UNSUBSCRIBE, "unsubscribe", 0, "stop streaming a job's events")      \
-	X(QUERY_POINTS, "query.points", 0, "lux at points")                    \
-	X(QUERY_GRID, "query.grid", 0, "lux on a calculation grid")            \
-	X(QUERY_SURFACES, "query.surfaces", 0, "lux per surface (node)")       \
-	X(QUERY_NODE, "query.node", 0, "lux on a grid over a node's faces")    \
-	X(EXPORT, "export", 0, "the solved mesh as GLB (payload)")             \
-	X(SENSOR_ADD, "sensor.add", 0, "a named illuminance sensor on a job")  \
-	X(SENSOR_LIST, "sensor.list", 0, "a job's sensors and latest lux")
+	X(HELLO, "hello", 0, NONE, "open the session: version, token")         \
+	X(STATUS, "status", 0, READ, "daemon memory, jobs by state, uptime")   \
+	X(SHUTDOWN, "shutdown", 0, ADMIN,                                      \
+	  "checkpoint every job and stop the daemon")                          \
+	X(SCENE_UPLOAD, "scene.upload", 1, SUBMIT,                             \
+	  "upload glTF/GLB bytes as a scene")                                  \
+	X(SCENE_LIST, "scene.list", 0, READ, "list scenes")                    \
+	X(SCENE_INFO, "scene.info", 0, READ,                                   \
+	  "one scene: counts, memory, jobs")                                   \
+	X(SCENE_DELETE, "scene.delete", 0, SUBMIT, "free a scene no job uses") \
+	X(JOB_CREATE, "job.create", 0, SUBMIT,                                 \
+	  "a solve job: scene, solver, options")                               \
+	X(JOB_LIST, "job.list", 0, READ, "list jobs")                          \
+	X(JOB_INFO, "job.info", 0, READ,                                       \
+	  "one job: state, options, latest stats")                             \
+	X(JOB_RUN, "job.run", 0, SUBMIT,                                       \
+	  "step N / to convergence / for a budget")                            \
+	X(JOB_PAUSE, "job.pause", 0, SUBMIT,                                   \
+	  "pause after the current iteration")                                 \
+	X(JOB_RESUME, "job.resume", 0, SUBMIT, "resume a paused job")          \
+	X(JOB_CANCEL, "job.cancel", 0, SUBMIT,                                 \
+	  "cancel (stops within an iteration)")                                \
+	X(JOB_SET, "job.set", 0, SUBMIT, "change eps between iterations")      \
+	X(JOB_DELETE, "job.delete", 0, SUBMIT, "forget a finished job")        \
+	X(SUBSCRIBE, "subscribe", 0, READ, "stream a job's events")            \
+	X(UNSUBSCRIBE, "unsubscribe", 0, READ,                                 \
+	  "stop streaming a job's events")                                     \
+	X(QUERY_POINTS, "query.points", 0, READ, "lux at points")              \
+	X(QUERY_GRID, "query.grid", 0, READ, "lux on a calculation grid")      \
+	X(QUERY_SURFACES, "query.surfaces", 0, READ, "lux per surface (node)") \
+	X(QUERY_NODE, "query.node", 0, READ,                                   \
+	  "lux on a grid over a node's faces")                                 \
+	X(EXPORT, "export", 0, READ, "the solved mesh as GLB (payload)")       \
+	X(SENSOR_ADD, "sensor.add", 0, SUBMIT,                                 \
+	  "a named illuminance sensor on a job")                               \
+	X(SENSOR_LIST, "sensor.list", 0, READ, "a job's sensors and latest lux")
 
 typedef enum rp_cmd {
-#define RP_CMD_ENUM_(name, str, payload, help) RP_CMD_##name,
+#define RP_CMD_ENUM_(name, str, payload, role, help) RP_CMD_##name,
 	RP_COMMANDS(RP_CMD_ENUM_)
 #undef RP_CMD_ENUM_
 	        RP_CMD_COUNT
 } rp_cmd;
 
+/*
+ * Roles, least to most: a connection's token names one (PROTOCOL.md §4).
+ * read: status, lists, info, queries, export, subscriptions; submit: that,
+ * plus uploads and jobs of its own; admin: every object, shutdown.
+ */
+typedef enum rp_role {
+	RP_ROLE_NONE, /* hello: before any role is known */
+	RP_ROLE_READ,
+	RP_ROLE_SUBMIT,
+	RP_ROLE_ADMIN
+} rp_role;
+
+const char *rp_role_name(rp_role r);
+/* -1 when name is none of "read", "submit", "admin". */
+int rp_role_parse(const char *name);
+/* The least role that may send c. */
+rp_role rp_cmd_role(rp_cmd c);
 const char *rp_cmd_name(rp_cmd c);
 const char *rp_cmd_help(rp_cmd c);
 int rp_cmd_takes_payload(rp_cmd c);

@@ -410,10 +410,11 @@ static void test_grid_spacing_reference_values(void **state)
 
 /*
  * Rows "| `name` | yes/no | ..." between <!-- rp:TAG --> and
- * <!-- /rp:TAG --> in PROTOCOL.md, in order: name and flag.
+ * <!-- /rp:TAG --> in PROTOCOL.md, in order: name and flag, and the
+ * third column's word in roles (when not NULL).
  */
 static int doc_table(const char *doc, const char *tag, char names[][64],
-                     int flags[], int max)
+                     int flags[], char roles[][8], int max)
 {
 	char open[64], close[64];
 	snprintf(open, sizeof open, "<!-- rp:%s -->", tag);
@@ -426,11 +427,15 @@ static int doc_table(const char *doc, const char *tag, char names[][64],
 		         close);
 	for (const char *l = s; l && l < e;
 	     l = strchr(l, '\n'), l = l ? l + 1 : l) {
-		char name[64], flag[8];
-		if (sscanf(l, "| `%63[^`]` | %7[a-z] |", name, flag) != 2)
+		char name[64], flag[8], role[8] = "";
+		int k = sscanf(l, "| `%63[^`]` | %7[a-z] | %7[a-z] |", name,
+		               flag, role);
+		if (k < 2)
 			continue;
 		assert_true(n < max);
 		snprintf(names[n], 64, "%s", name);
+		if (roles)
+			snprintf(roles[n], 8, "%s", role);
 		if (strcmp(flag, "yes") && strcmp(flag, "no"))
 			fail_msg("%s row '%s': flag '%s' is not yes/no", tag,
 			         name, flag);
@@ -515,7 +520,7 @@ static void test_protocol_md_tables_match_header(void **state)
 	fclose(f);
 
 	check_json_examples(doc);
-	n = doc_table(doc, "errors", names, flags, 64);
+	n = doc_table(doc, "errors", names, flags, NULL, 64);
 	if (n != RP_ERR_COUNT)
 		fail_msg("PROTOCOL.md lists %d error codes, rp.h %d", n,
 		         RP_ERR_COUNT);
@@ -528,7 +533,8 @@ static void test_protocol_md_tables_match_header(void **state)
 			         "%d",
 			         names[i], flags[i], rp_err_closes((rp_err)i));
 	}
-	n = doc_table(doc, "commands", names, flags, 64);
+	char roles[64][8];
+	n = doc_table(doc, "commands", names, flags, roles, 64);
 	if (n != RP_CMD_COUNT)
 		fail_msg("PROTOCOL.md lists %d commands, rp.h %d", n,
 		         RP_CMD_COUNT);
@@ -541,6 +547,11 @@ static void test_protocol_md_tables_match_header(void **state)
 			         "%d",
 			         names[i], flags[i],
 			         rp_cmd_takes_payload((rp_cmd)i));
+		if (strcmp(roles[i], rp_role_name(rp_cmd_role((rp_cmd)i))))
+			fail_msg("command '%s': PROTOCOL.md role '%s', rp.h "
+			         "'%s'",
+			         names[i], roles[i],
+			         rp_role_name(rp_cmd_role((rp_cmd)i)));
 	}
 	free(doc);
 }

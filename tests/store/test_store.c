@@ -152,11 +152,11 @@ static void test_scenes_add_list_read_delete(void **state)
 	srv_store *st = open_ok(dir);
 	char msg[1024];
 	uint64_t a, b, c;
-	assert_int_equal(
-	        srv_store_scene_add(st, "box", "abc", 3, &a, msg, sizeof(msg)),
-	        0);
-	assert_int_equal(srv_store_scene_add(st, "hall", "0123456789", 10, &b,
-	                                     msg, sizeof(msg)),
+	assert_int_equal(srv_store_scene_add(st, "box", "", "abc", 3, &a, msg,
+	                                     sizeof(msg)),
+	                 0);
+	assert_int_equal(srv_store_scene_add(st, "hall", "", "0123456789", 10,
+	                                     &b, msg, sizeof(msg)),
 	                 0);
 	assert_true(b > a);
 	scenes_seen sc;
@@ -185,16 +185,17 @@ static void test_scenes_add_list_read_delete(void **state)
 	char longname[300];
 	memset(longname, 'n', sizeof(longname) - 1);
 	longname[sizeof(longname) - 1] = '\0';
-	assert_int_equal(
-	        srv_store_scene_add(st, longname, "x", 1, &c, msg, sizeof(msg)),
-	        -1);
+	assert_int_equal(srv_store_scene_add(st, longname, "", "x", 1, &c, msg,
+	                                     sizeof(msg)),
+	                 -1);
 	assert_non_null(strstr(msg, "scene name is 299 bytes"));
 	srv_store_close(st);
 
 	/* Ids are never reused, even across a reopen. */
 	st = open_ok(dir);
 	assert_int_equal(
-	        srv_store_scene_add(st, "", "z", 1, &c, msg, sizeof(msg)), 0);
+	        srv_store_scene_add(st, "", "", "z", 1, &c, msg, sizeof(msg)),
+	        0);
 	assert_true(c > b);
 	list_all(st, &sc, &jb);
 	assert_int_equal(sc.n, 2);
@@ -210,8 +211,8 @@ static void test_jobs_persist(void **state)
 	srv_store *st = open_ok(dir);
 	char msg[1024];
 	uint64_t scene;
-	assert_int_equal(srv_store_scene_add(st, "s", "data", 4, &scene, msg,
-	                                     sizeof(msg)),
+	assert_int_equal(srv_store_scene_add(st, "s", "", "data", 4, &scene,
+	                                     msg, sizeof(msg)),
 	                 0);
 	srv_job_row row;
 	memset(&row, 0, sizeof(row));
@@ -286,8 +287,8 @@ static void test_checkpoint_then_reopen(void **state)
 	srv_store *st = open_ok(dir);
 	char msg[1024];
 	uint64_t scene;
-	assert_int_equal(srv_store_scene_add(st, "s", "data", 4, &scene, msg,
-	                                     sizeof(msg)),
+	assert_int_equal(srv_store_scene_add(st, "s", "", "data", 4, &scene,
+	                                     msg, sizeof(msg)),
 	                 0);
 	srv_job_row row;
 	memset(&row, 0, sizeof(row));
@@ -362,7 +363,7 @@ static void crash_child(const char *dir, uint64_t job, uint64_t scene, int fd)
 		char name[32];
 		snprintf(name, sizeof(name), "crash-%u", i);
 		sol = sol_make(i + 1000, &len);
-		if (srv_store_scene_add(st, name, sol, len, &id, msg,
+		if (srv_store_scene_add(st, name, "", sol, len, &id, msg,
 		                        sizeof(msg)) < 0)
 			_exit(5);
 		free(sol);
@@ -440,8 +441,8 @@ static void test_kill9_leaves_consistent_store(void **state)
 	snprintf(dir, sizeof(dir), "%s", d);
 	srv_store *st = open_ok(dir);
 	uint64_t scene;
-	assert_int_equal(srv_store_scene_add(st, "base", "s", 1, &scene, msg,
-	                                     sizeof(msg)),
+	assert_int_equal(srv_store_scene_add(st, "base", "", "s", 1, &scene,
+	                                     msg, sizeof(msg)),
 	                 0);
 	srv_job_row row;
 	memset(&row, 0, sizeof(row));
@@ -500,11 +501,11 @@ static void test_open_repairs_outside_damage(void **state)
 	snprintf(dir, sizeof(dir), "%s", d);
 	srv_store *st = open_ok(dir);
 	uint64_t s1, s2;
-	assert_int_equal(srv_store_scene_add(st, "keep", "1234", 4, &s1, msg,
-	                                     sizeof(msg)),
+	assert_int_equal(srv_store_scene_add(st, "keep", "", "1234", 4, &s1,
+	                                     msg, sizeof(msg)),
 	                 0);
-	assert_int_equal(srv_store_scene_add(st, "lost", "5678", 4, &s2, msg,
-	                                     sizeof(msg)),
+	assert_int_equal(srv_store_scene_add(st, "lost", "", "5678", 4, &s2,
+	                                     msg, sizeof(msg)),
 	                 0);
 	srv_job_row row;
 	memset(&row, 0, sizeof(row));
@@ -646,8 +647,8 @@ static void scene_with_jobs(srv_store *st, int n, uint64_t *job)
 {
 	char msg[1024];
 	uint64_t scene;
-	assert_int_equal(srv_store_scene_add(st, "s", "data", 4, &scene, msg,
-	                                     sizeof(msg)),
+	assert_int_equal(srv_store_scene_add(st, "s", "", "data", 4, &scene,
+	                                     msg, sizeof(msg)),
 	                 0);
 	for (int i = 0; i < n; i++) {
 		srv_job_row row;
@@ -710,51 +711,92 @@ static void test_sensors_persist(void **state)
 	srv_store_close(st);
 }
 
-/* A version 1 database (before sensors were stored) is brought up to
- * version 2 at open, its scenes and jobs kept. */
-static void test_schema_1_is_upgraded(void **state)
+/* Version 1 (before sensors were stored) and version 2 (before owners)
+ * databases are brought up to version 3 at open, their scenes and jobs
+ * kept, owned by the local admin (""). */
+static void test_old_schemas_are_upgraded(void **state)
 {
 	(void)state;
-	const char *d = new_dir("schema1");
-	char dir[512], path[700], msg[1024];
-	snprintf(dir, sizeof(dir), "%s", d);
-	srv_store *st = open_ok(dir);
-	uint64_t job;
-	scene_with_jobs(st, 1, &job);
-	srv_store_close(st);
-	/* Make it what luxradd with schema 1 left. */
-	snprintf(path, sizeof(path), "%s/luxradd.db", dir);
-	sqlite3 *db;
-	assert_int_equal(sqlite3_open(path, &db), SQLITE_OK);
-	assert_int_equal(sqlite3_exec(db,
-	                              "DROP TABLE sensors; "
-	                              "PRAGMA user_version = 1",
-	                              NULL, NULL, NULL),
-	                 SQLITE_OK);
-	sqlite3_close(db);
+	static const char *const downgrade[] = {
+	        "DROP TABLE sensors; ALTER TABLE scenes DROP COLUMN owner; "
+	        "ALTER TABLE jobs DROP COLUMN owner; PRAGMA user_version = 1",
+	        "ALTER TABLE scenes DROP COLUMN owner; "
+	        "ALTER TABLE jobs DROP COLUMN owner; PRAGMA user_version = 2"};
+	for (int v = 1; v <= 2; v++) {
+		char name[32], dir[512], path[700], msg[1024], want[128];
+		snprintf(name, sizeof(name), "schema%d", v);
+		snprintf(dir, sizeof(dir), "%s", new_dir(name));
+		srv_store *st = open_ok(dir);
+		uint64_t job;
+		scene_with_jobs(st, 1, &job);
+		srv_store_close(st);
+		/* Make it what luxradd with schema v left. */
+		snprintf(path, sizeof(path), "%s/luxradd.db", dir);
+		sqlite3 *db;
+		assert_int_equal(sqlite3_open(path, &db), SQLITE_OK);
+		assert_int_equal(
+		        sqlite3_exec(db, downgrade[v - 1], NULL, NULL, NULL),
+		        SQLITE_OK);
+		sqlite3_close(db);
 
+		st = open_ok(dir);
+		snprintf(want, sizeof(want),
+		         "schema upgraded from version %d to 3", v);
+		assert_string_equal(srv_store_repairs(st), want);
+		scenes_seen sc;
+		jobs_seen jb;
+		list_all(st, &sc, &jb);
+		assert_int_equal(sc.n, 1);
+		assert_int_equal(jb.n, 1);
+		jobs_clear(&jb);
+		const double pt[6] = {1, 2, 3, 0, 0, 1};
+		assert_int_equal(srv_store_sensor_add(st, job, "s", pt, msg,
+		                                      sizeof(msg)),
+		                 0);
+		srv_store_close(st);
+		assert_int_equal(sqlite3_open(path, &db), SQLITE_OK);
+		sqlite3_stmt *q;
+		assert_int_equal(sqlite3_prepare_v2(db, "PRAGMA user_version",
+		                                    -1, &q, NULL),
+		                 SQLITE_OK);
+		assert_int_equal(sqlite3_step(q), SQLITE_ROW);
+		assert_int_equal(sqlite3_column_int(q, 0), 3);
+		sqlite3_finalize(q);
+		sqlite3_close(db);
+	}
+}
+
+/* Owners are stored and listed back. */
+static void test_owners_round_trip(void **state)
+{
+	(void)state;
+	char dir[512], msg[1024];
+	snprintf(dir, sizeof(dir), "%s", new_dir("owners"));
+	srv_store *st = open_ok(dir);
+	uint64_t scene;
+	assert_int_equal(srv_store_scene_add(st, "s", "alice", "data", 4,
+	                                     &scene, msg, sizeof(msg)),
+	                 0);
+	srv_job_row r = {.scene_id = scene,
+	                 .options_json = "{}",
+	                 .target_json = "",
+	                 .eps_log_json = "[]",
+	                 .stats_json = "",
+	                 .error = ""};
+	snprintf(r.name, sizeof(r.name), "j");
+	snprintf(r.owner, sizeof(r.owner), "bob");
+	assert_int_equal(srv_store_job_add(st, &r, msg, sizeof(msg)), 0);
+	srv_store_close(st);
 	st = open_ok(dir);
-	assert_string_equal(srv_store_repairs(st),
-	                    "schema upgraded from version 1 to 2");
 	scenes_seen sc;
 	jobs_seen jb;
 	list_all(st, &sc, &jb);
 	assert_int_equal(sc.n, 1);
 	assert_int_equal(jb.n, 1);
+	assert_string_equal(sc.rows[0].owner, "alice");
+	assert_string_equal(jb.rows[0].owner, "bob");
 	jobs_clear(&jb);
-	const double pt[6] = {1, 2, 3, 0, 0, 1};
-	assert_int_equal(
-	        srv_store_sensor_add(st, job, "s", pt, msg, sizeof(msg)), 0);
 	srv_store_close(st);
-	assert_int_equal(sqlite3_open(path, &db), SQLITE_OK);
-	sqlite3_stmt *q;
-	assert_int_equal(
-	        sqlite3_prepare_v2(db, "PRAGMA user_version", -1, &q, NULL),
-	        SQLITE_OK);
-	assert_int_equal(sqlite3_step(q), SQLITE_ROW);
-	assert_int_equal(sqlite3_column_int(q, 0), 2);
-	sqlite3_finalize(q);
-	sqlite3_close(db);
 }
 
 static void test_unwritable_directory_is_an_error(void **state)
@@ -803,7 +845,8 @@ int main(void)
 	        cmocka_unit_test(test_corrupt_database_is_an_error),
 	        cmocka_unit_test(test_unwritable_directory_is_an_error),
 	        cmocka_unit_test(test_sensors_persist),
-	        cmocka_unit_test(test_schema_1_is_upgraded),
+	        cmocka_unit_test(test_old_schemas_are_upgraded),
+	        cmocka_unit_test(test_owners_round_trip),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);
 }

@@ -76,6 +76,10 @@ static const cfg_key keys[] = {
          "/etc/luxradd/token",
          "file holding the shared secret clients send in hello; none = no "
          "token"},
+        {"users_file", K_FILE, F(users_file), 0, 0, "FILE",
+         "/etc/luxradd/users",
+         "named tokens with roles, one \"NAME ROLE sha256:HEX\" per line "
+         "(luxradd user-add writes them); none = no users"},
         {"require_token", K_BOOL, F(require_token), 0, 1, "BOOL", "yes",
          "ask for the token on loopback and Unix connections too"},
         {"workers", K_INT, F(workers), 1, 256, "N", "4",

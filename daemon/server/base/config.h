@@ -38,6 +38,7 @@ typedef struct srv_config {
 	                             ~/.local/state/luxradd; /var/lib/luxradd
 	                             for root */
 	char token_file[4096];    /* "" = no token */
+	char users_file[4096];    /* "" = no users (cmd/users.c) */
 	int require_token;        /* 1: token even on loopback / Unix */
 	int workers;              /* jobs solved at once; default 2 */
 	int solver_threads;       /* engine threads per job; 0 = cores /

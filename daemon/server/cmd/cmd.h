@@ -75,6 +75,8 @@ struct cmd_conn {
 	int want_out;       /* EPOLLOUT armed */
 	int reading;        /* EPOLLIN armed */
 	double close_at;    /* closing: give up flushing at this time */
+	char user[64];      /* who said hello ("" = the local admin) */
+	rp_role role;       /* what they may do; NONE before hello */
 	double last_active; /* rad_seconds() of the last byte in or out */
 	double opened;      /* rad_seconds() at accept: the hello deadline */
 	double hdr_start;   /* first byte of a header still incomplete; 0
@@ -86,6 +88,29 @@ struct cmd_conn {
 	int nsubs, subs_cap;
 	cmd_conn *next, *prev;
 };
+
+/* ------------------------------------------------------------------ users */
+
+#define CMD_USER_NAME_MAX 64
+
+/* One line of the users file (users.c). */
+typedef struct cmd_user {
+	char name[CMD_USER_NAME_MAX];
+	rp_role role;
+	unsigned char hash[32]; /* SHA-256 of the token */
+} cmd_user;
+
+/* Read cfg->users_file (none: no users); -1 with msg, the old kept. */
+int cmd_users_load(cmd_server *d, const srv_config *cfg, char *msg,
+                   size_t msglen);
+/* The user whose token this is, or NULL. */
+const cmd_user *cmd_users_check(const cmd_server *d, const char *token);
+/* 1 if c may see (and, with its role, act on) an object of owner. */
+int cmd_visible(const cmd_conn *c, const char *owner);
+/* luxradd user-add: append NAME ROLE and a new token's hash to path,
+ * print the token on out; -1 with msg. */
+int cmd_user_add(const char *path, const char *name, const char *role,
+                 FILE *out, char *msg, size_t msglen);
 
 /*
  * Why the daemon refused or closed a connection itself, counted for
@@ -194,6 +219,9 @@ cmd_result cmd_req_defer(cmd_req *r, srv_pool *pool, srv_task *t,
 void cmd_task_reply(srv *s, srv_task *t, json_t *reply);
 /* Look up {job: id} in a request; CMD_ERROR with not_found. */
 srv_job *cmd_req_job(cmd_req *r, int *failed);
+/* The request's "scene": NULL (r failed) when absent or not the
+ * connection's to see. */
+srv_scene *cmd_req_scene(cmd_req *r);
 /* Map an engine status to a wire error code (every status has one). */
 rp_err cmd_err_from_rad(rad_status st);
 
@@ -306,6 +334,9 @@ struct cmd_server {
 	cmd_waiter *waiters; /* job_cmd.c: replies owed */
 	char *token;         /* NULL = none configured */
 	size_t token_len;
+	cmd_user *users; /* the users file (users.c) */
+	int nusers;
+	int users_on; /* a users file is configured */
 	/* A decoded frame, handed on by conn.c (cmd_dispatch). */
 	void (*on_frame)(cmd_server *d, cmd_conn *c, rp_frame *f, size_t used);
 	const char

@@ -56,7 +56,8 @@ static cmd_result cmd_shutdown(cmd_req *r);
 #define CMD_FN_SENSOR_LIST cmd_sensor_list
 
 static const cmd_fn cmd_table[RP_CMD_COUNT] = {
-#define CMD_ROW_(name, str, payload, help) [RP_CMD_##name] = CMD_FN_##name,
+#define CMD_ROW_(name, str, payload, role, help)                               \
+	[RP_CMD_##name] = CMD_FN_##name,
         RP_COMMANDS(CMD_ROW_)
 #undef CMD_ROW_
 };
@@ -98,6 +99,16 @@ static int precheck(cmd_server *d, cmd_conn *c, rp_frame *f, json_t *id,
 	if (!c->authed && *k != RP_CMD_HELLO) {
 		cmd_conn_send_error(d, c, id, RP_ERR_AUTH_REQUIRED,
 		                    "the first request must be \"hello\"");
+		return -1;
+	}
+	if (c->authed && rp_cmd_role((rp_cmd)*k) > c->role) {
+		cmd_conn_send_error(
+		        d, c, id, RP_ERR_FORBIDDEN,
+		        "\"%s\" needs the role %s; this "
+		        "connection's user %s%s%s has the role %s",
+		        name, rp_role_name(rp_cmd_role((rp_cmd)*k)),
+		        c->user[0] ? "'" : "", c->user[0] ? c->user : "(local)",
+		        c->user[0] ? "'" : "", rp_role_name(c->role));
 		return -1;
 	}
 	if (f->payload && !rp_cmd_takes_payload((rp_cmd)*k)) {
@@ -207,17 +218,27 @@ static cmd_result cmd_hello(cmd_req *r)
 		return cmd_req_fail(r, RP_ERR_STATE,
 		                    "the session is already open (second "
 		                    "hello)");
-	/* A token on a connection that does not need one is ignored. */
-	if (c->needs_token &&
-	    (!token || !d->token ||
-	     !rp_token_equal(token, strlen(token), d->token, d->token_len)))
+	/* A token names a user (users.c) or is the shared token_file
+	 * secret (the admin); without one, a connection that needs none is
+	 * the local admin.  With neither users nor a token configured, a
+	 * token is ignored. */
+	const cmd_user *u = token ? cmd_users_check(d, token) : NULL;
+	int shared =
+	        token && d->token &&
+	        rp_token_equal(token, strlen(token), d->token, d->token_len);
+	int checked = d->users_on || d->token;
+	if (token && checked && !u && !shared)
+		return cmd_req_fail(r, RP_ERR_AUTH_FAILED, "wrong token");
+	if (!token && c->needs_token)
 		return cmd_req_fail(r, RP_ERR_AUTH_FAILED,
-		                    token ? "wrong token"
-		                          : "this connection needs a token in "
-		                            "hello");
+		                    "this connection needs a token in hello");
+	snprintf(c->user, sizeof(c->user), "%s", u ? u->name : "");
+	c->role = u ? u->role : RP_ROLE_ADMIN;
 	c->authed = 1;
-	srv_debug("connection %llu (%s): hello from %.100s",
-	          (unsigned long long)c->id, c->peer, client ? client : "?");
+	srv_debug("connection %llu (%s): hello from %.100s as %s (%s)",
+	          (unsigned long long)c->id, c->peer, client ? client : "?",
+	          c->user[0] ? c->user : "the local admin",
+	          rp_role_name(c->role));
 	json_t *caps = json_pack("[ssssssss]", "scene.gltf", "scene.glb",
 	                         "export.glb", "subscribe", "query.points",
 	                         "query.grid", "query.surfaces", "query.node");
@@ -227,6 +248,9 @@ static cmd_result cmd_hello(cmd_req *r)
 	for (int k = 0; k < RAD_SOLVER_NKINDS; k++)
 		json_array_append_new(solvers, json_string(rad_solver_kind_name(
 		                                       (rad_solver_kind)k)));
+	json_object_set_new(r->res, "user",
+	                    json_pack("{s:s, s:s}", "name", c->user, "role",
+	                              rp_role_name(c->role)));
 	json_object_set_new(r->res, "version", json_integer(RP_VERSION));
 	json_object_set_new(r->res, "server",
 	                    json_string(SRV_NAME "/" SRV_VERSION));
@@ -277,7 +301,11 @@ static cmd_result cmd_status(cmd_req *r)
 	for (int k = 0; k < SRV_JOB_NSTATES; k++)
 		json_object_set_new(jobs, srv_job_state_name((srv_job_state)k),
 		                    json_integer(sum.jobs_by_state[k]));
+	/* The lists show what this connection may see; the counts and
+	 * the memory are the daemon's. */
 	for (srv_scene *sc = s->scenes; sc; sc = sc->next) {
+		if (!cmd_visible(r->c, sc->owner))
+			continue;
 		json_t *o = json_object();
 		json_object_set_new(o, "id", json_integer((json_int_t)sc->id));
 		json_object_set_new(o, "name", json_string(sc->name));
@@ -286,6 +314,8 @@ static cmd_result cmd_status(cmd_req *r)
 		json_array_append_new(scenes, o);
 	}
 	for (srv_job *j = s->jobs; j; j = j->next) {
+		if (!cmd_visible(r->c, j->owner))
+			continue;
 		json_t *o = json_object();
 		pthread_mutex_lock(&j->mu);
 		json_object_set_new(o, "id", json_integer((json_int_t)j->id));

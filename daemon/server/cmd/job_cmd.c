@@ -91,7 +91,7 @@ cmd_result cmd_job_create(cmd_req *r)
 		return cmd_req_fail(r, RP_ERR_BAD_REQUEST,
 		                    "\"name\" is longer than 255 bytes");
 	srv_scene *sc = srv_scene_find(s, scene_id);
-	if (!sc)
+	if (!sc || !cmd_visible(r->c, sc->owner))
 		return cmd_req_fail(r, RP_ERR_NOT_FOUND, "no scene %llu",
 		                    (unsigned long long)scene_id);
 	if (srv_job_options_parse(s, json_object_get(r->hdr, "options"),
@@ -112,6 +112,7 @@ cmd_result cmd_job_create(cmd_req *r)
 	}
 	j->opt = o;
 	snprintf(j->name, sizeof(j->name), "%s", name ? name : "");
+	snprintf(j->owner, sizeof(j->owner), "%s", r->c->user);
 	c->job = j;
 	sc->njobs++;
 	s->jobs_pending++;
@@ -124,9 +125,12 @@ cmd_result cmd_job_list(cmd_req *r)
 {
 	json_t *arr = json_array();
 	for (srv_job *j = r->s->jobs; j; j = j->next) {
+		if (!cmd_visible(r->c, j->owner))
+			continue;
 		json_t *o = json_object();
 		json_object_set_new(o, "id", json_integer((json_int_t)j->id));
 		json_object_set_new(o, "name", json_string(j->name));
+		json_object_set_new(o, "owner", json_string(j->owner));
 		json_object_set_new(o, "scene",
 		                    json_integer((json_int_t)j->scene->id));
 		json_object_set_new(
@@ -159,6 +163,7 @@ cmd_result cmd_job_info(cmd_req *r)
 	json_t *o = json_object();
 	json_object_set_new(o, "id", json_integer((json_int_t)j->id));
 	json_object_set_new(o, "name", json_string(j->name));
+	json_object_set_new(o, "owner", json_string(j->owner));
 	json_object_set_new(o, "scene", json_integer((json_int_t)j->scene->id));
 	json_object_set_new(o, "solver",
 	                    json_string(rad_solver_kind_name(j->opt.solver)));

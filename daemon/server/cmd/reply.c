@@ -53,14 +53,29 @@ srv_job *cmd_req_job(cmd_req *r, int *failed)
 	*failed = 1;
 	if (rp_arg_u64(r->hdr, "job", 1, &id, &r->err) != 0)
 		return NULL;
+	/* Another user's job is as absent as one that never was. */
 	srv_job *j = srv_job_find(r->s, id);
-	if (!j) {
+	if (!j || !cmd_visible(r->c, j->owner)) {
 		cmd_req_fail(r, RP_ERR_NOT_FOUND, "no job %llu",
 		             (unsigned long long)id);
 		return NULL;
 	}
 	*failed = 0;
 	return j;
+}
+
+srv_scene *cmd_req_scene(cmd_req *r)
+{
+	uint64_t id = 0;
+	if (rp_arg_u64(r->hdr, "scene", 1, &id, &r->err) != 0)
+		return NULL;
+	srv_scene *sc = srv_scene_find(r->s, id);
+	if (!sc || !cmd_visible(r->c, sc->owner)) {
+		cmd_req_fail(r, RP_ERR_NOT_FOUND, "no scene %llu",
+		             (unsigned long long)id);
+		return NULL;
+	}
+	return sc;
 }
 
 void cmd_reply_deferred(cmd_server *d, uint64_t conn_id, json_t *reply)

@@ -24,6 +24,7 @@ typedef struct upload_task {
 	const unsigned char *payload; /* inside buf */
 	size_t len;
 	char name[256];
+	char owner[64];
 	srv_scene *sc; /* result */
 	rp_err code;   /* error */
 	char msg[600];
@@ -35,7 +36,8 @@ static void upload_run(srv *s, srv_task *t)
 	rad_error err = {0};
 	uint64_t refusals = rad_mem_limit_refusals();
 
-	int rc = srv_scene_create(s, u->name, u->payload, u->len, &u->sc, &err);
+	int rc = srv_scene_create(s, u->name, u->owner, u->payload, u->len,
+	                          &u->sc, &err);
 	if (rc == -1) {
 		u->code = cmd_err_from_rad(err.code);
 		snprintf(u->msg, sizeof(u->msg), "scene refused: %s", err.msg);
@@ -102,6 +104,7 @@ cmd_result cmd_scene_upload(cmd_req *r)
 	u->payload = u->buf + in_off + off;
 	u->len = r->payload_len;
 	snprintf(u->name, sizeof(u->name), "%s", name ? name : "");
+	snprintf(u->owner, sizeof(u->owner), "%s", r->c->user);
 	s->scenes_pending++;
 	return cmd_req_defer(r, &s->store_pool, &u->t, upload_run, upload_done);
 }
@@ -112,9 +115,12 @@ cmd_result cmd_scene_list(cmd_req *r)
 {
 	json_t *arr = json_array();
 	for (srv_scene *sc = r->s->scenes; sc; sc = sc->next) {
+		if (!cmd_visible(r->c, sc->owner))
+			continue;
 		json_t *o = json_object();
 		json_object_set_new(o, "id", json_integer((json_int_t)sc->id));
 		json_object_set_new(o, "name", json_string(sc->name));
+		json_object_set_new(o, "owner", json_string(sc->owner));
 		json_object_set_new(o, "bytes",
 		                    json_integer((json_int_t)sc->bytes));
 		json_object_set_new(o, "polygons",
@@ -127,18 +133,6 @@ cmd_result cmd_scene_list(cmd_req *r)
 	}
 	json_object_set_new(r->res, "scenes", arr);
 	return CMD_REPLY;
-}
-
-static srv_scene *req_scene(cmd_req *r)
-{
-	uint64_t id = 0;
-	if (rp_arg_u64(r->hdr, "scene", 1, &id, &r->err) != 0)
-		return NULL;
-	srv_scene *sc = srv_scene_find(r->s, id);
-	if (!sc)
-		cmd_req_fail(r, RP_ERR_NOT_FOUND, "no scene %llu",
-		             (unsigned long long)id);
-	return sc;
 }
 
 /*
@@ -220,12 +214,12 @@ static json_t *luminaires_json(const srv_scene *s)
 
 cmd_result cmd_scene_info(cmd_req *r)
 {
-	srv_scene *sc = req_scene(r);
+	srv_scene *sc = cmd_req_scene(r);
 	if (!sc)
 		return CMD_ERROR;
 	json_t *body = srv_scene_json(sc), *jobs = json_array();
 	for (srv_job *j = r->s->jobs; j; j = j->next)
-		if (j->scene == sc)
+		if (j->scene == sc && cmd_visible(r->c, j->owner))
 			json_array_append_new(jobs,
 			                      json_integer((json_int_t)j->id));
 	json_object_update(r->res, body);
@@ -269,7 +263,7 @@ static void scene_del_done(srv *s, srv_task *t)
 cmd_result cmd_scene_delete(cmd_req *r)
 {
 	srv *s = r->s;
-	srv_scene *sc = req_scene(r);
+	srv_scene *sc = cmd_req_scene(r);
 	if (!sc)
 		return CMD_ERROR;
 	if (sc->njobs > 0)

@@ -87,6 +87,7 @@ int cmd_load_token(cmd_server *d, const srv_config *cfg, char *msg,
 		memset(d->token, 0, d->token_len);
 		free(d->token);
 	}
+	free(d->users);
 	d->token = t;
 	d->token_len = n - a;
 	memset(buf, 0, sizeof(buf));
@@ -308,7 +309,7 @@ int cmd_server_listen(cmd_server *d, char *msg, size_t msglen)
 	if (c->listen_tcp[0] && listen_tcp(d, c->listen_tcp, 0, msg, msglen))
 		return -1;
 	for (int i = 0; i < d->nlis; i++) {
-		if (d->lis[i].needs_token && !d->token) {
+		if (d->lis[i].needs_token && !d->token && !d->users_on) {
 			snprintf(msg, msglen,
 			         "refusing to listen on %s beyond loopback "
 			         "without a token: set token_file "
@@ -384,6 +385,12 @@ static void reload_config(cmd_server *d)
 		snprintf(nc.token_file, sizeof(nc.token_file), "%s",
 		         s->cfg.token_file);
 	}
+	if (cmd_users_load(d, &nc, msg, sizeof(msg)) != 0) {
+		srv_error("SIGHUP: users not reloaded (old ones kept): %s",
+		          msg);
+		snprintf(nc.users_file, sizeof(nc.users_file), "%s",
+		         s->cfg.users_file);
+	}
 	if (strcmp(nc.listen_tcp, s->cfg.listen_tcp) ||
 	    strcmp(nc.listen_unix, s->cfg.listen_unix) ||
 	    strcmp(nc.metrics_listen, s->cfg.metrics_listen) ||
@@ -393,7 +400,7 @@ static void reload_config(cmd_server *d)
 	    nc.solver_threads != s->cfg.solver_threads)
 		srv_warn("SIGHUP: listener, data directory and thread "
 		         "changes need a restart; keeping the running ones");
-	if (nc.require_token && !d->token) {
+	if (nc.require_token && !d->token && !d->users_on) {
 		srv_error("SIGHUP: require_token without a token; keeping "
 		          "the old setting");
 		nc.require_token = s->cfg.require_token;
@@ -409,8 +416,8 @@ static void reload_config(cmd_server *d)
 	nc.solver_threads = s->cfg.solver_threads;
 	srv_core_reconfigure(s, &nc);
 	srv_log_set_level(nc.log_level);
-	srv_info("SIGHUP: configuration reloaded (token %s)",
-	         d->token ? "set" : "none");
+	srv_info("SIGHUP: configuration reloaded (token %s, %d users)",
+	         d->token ? "set" : "none", d->nusers);
 }
 
 static void on_signal(el_loop *l, int signo, void *ud)
@@ -444,12 +451,13 @@ int cmd_server_init(cmd_server *d, const srv_config *cfg, int argc, char **argv,
 	d->next_conn_id = 1;
 	d->on_frame = cmd_dispatch;
 	srv_config_dump(cfg, config_line, NULL);
-	if (cmd_load_token(d, cfg, msg, msglen) != 0)
+	if (cmd_load_token(d, cfg, msg, msglen) != 0 ||
+	    cmd_users_load(d, cfg, msg, msglen) != 0)
 		return -2;
-	if (cfg->require_token && !d->token) {
+	if (cfg->require_token && !d->token && !d->users_on) {
 		snprintf(msg, msglen,
-		         "require_token is set but no token_file "
-		         "is configured");
+		         "require_token is set but neither token_file nor "
+		         "users_file is configured");
 		return -2;
 	}
 

@@ -63,6 +63,8 @@ struct srv_scene {
 	atomic_int refs;
 	uint64_t id;             /* the store's id */
 	char name[256];          /* immutable */
+	char owner[64];          /* the user who uploaded it ("" = the local
+	                            admin); immutable */
 	uint64_t bytes;          /* size uploaded */
 	double created;          /* Unix time */
 	rad_scene *scene;        /* committed: read-only, any thread */
@@ -96,8 +98,9 @@ void srv_scene_unregister(srv *s, srv_scene *sc);
  * registered); -1 when the bytes are refused (err from the loader); -2
  * when the store fails (err->msg says why).
  */
-int srv_scene_create(srv *s, const char *name, const void *bytes, size_t len,
-                     srv_scene **out, rad_error *err);
+int srv_scene_create(srv *s, const char *name, const char *owner,
+                     const void *bytes, size_t len, srv_scene **out,
+                     rad_error *err);
 /* Delete a scene's stored bytes (store thread): 0, or -1 with msg. */
 int srv_scene_forget(srv *s, uint64_t id, char *msg, size_t msglen);
 
@@ -164,6 +167,7 @@ struct srv_job {
 	srv *srv;
 	uint64_t id;
 	char name[256];
+	char owner[64];   /* the user who created it ("" = the local admin) */
 	srv_scene *scene; /* ref held */
 	rad_options opt;  /* initial options (threads resolved) */
 	double created;   /* Unix time */

@@ -33,6 +33,7 @@ static void fill_row(const srv_job *j, srv_job_row *row, const srv_sol *sol,
 	row->id = j->id;
 	row->scene_id = j->scene->id;
 	snprintf(row->name, sizeof(row->name), "%s", j->name);
+	snprintf(row->owner, sizeof(row->owner), "%s", j->owner);
 	row->options_json = srv_job_options_text(j);
 	row->target_json = srv_job_target_text(j);
 	row->eps_log_json = srv_job_eps_log_text(j);

@@ -86,6 +86,7 @@ static void recover_scene(srv *s, const srv_scene_row *r)
 		          (unsigned long long)r->id, err.msg);
 		return;
 	}
+	snprintf(sc->owner, sizeof(sc->owner), "%s", r->owner);
 	srv_scene_register(s, sc);
 	srv_info("scene %llu '%s' restored (%u polygons)",
 	         (unsigned long long)sc->id, sc->name, sc->counts.polygons);
@@ -220,6 +221,7 @@ static void recover_job(srv *s, const srv_job_row *r)
 	json_decref(o);
 	j->id = r->id;
 	snprintf(j->name, sizeof(j->name), "%s", r->name);
+	snprintf(j->owner, sizeof(j->owner), "%s", r->owner);
 	if (!j->name[0])
 		snprintf(j->name, sizeof(j->name), "job-%llu",
 		         (unsigned long long)r->id);

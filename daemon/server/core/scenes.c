@@ -153,6 +153,7 @@ json_t *srv_scene_json(const srv_scene *sc)
 	warnings_text(sc, warn, sizeof(warn));
 	json_object_set_new(o, "scene", json_integer((json_int_t)sc->id));
 	json_object_set_new(o, "name", json_string(sc->name));
+	json_object_set_new(o, "owner", json_string(sc->owner));
 	/* Not "bytes": at the top of a header that announces a payload. */
 	json_object_set_new(o, "size_bytes",
 	                    json_integer((json_int_t)sc->bytes));
@@ -166,8 +167,9 @@ json_t *srv_scene_json(const srv_scene *sc)
 
 /* ------------------------------------------------ add / remove (store) */
 
-int srv_scene_create(srv *s, const char *name, const void *bytes, size_t len,
-                     srv_scene **out, rad_error *err)
+int srv_scene_create(srv *s, const char *name, const char *owner,
+                     const void *bytes, size_t len, srv_scene **out,
+                     rad_error *err)
 {
 	double t0 = rad_seconds();
 	uint64_t id = 0;
@@ -179,8 +181,9 @@ int srv_scene_create(srv *s, const char *name, const void *bytes, size_t len,
 	if (!sc)
 		return -1;
 	pthread_mutex_lock(&s->store_mu);
-	int rc = srv_store_scene_add(s->store, name, bytes, len, &id, msg,
-	                             sizeof(msg));
+	snprintf(sc->owner, sizeof(sc->owner), "%s", owner);
+	int rc = srv_store_scene_add(s->store, name, owner, bytes, len, &id,
+	                             msg, sizeof(msg));
 	pthread_mutex_unlock(&s->store_mu);
 	if (rc != 0) {
 		snprintf(err->msg, sizeof(err->msg), "%s", msg);

@@ -33,6 +33,7 @@ typedef struct srv_scene_row {
 	char name[256];
 	uint64_t bytes; /* size of the uploaded file */
 	double created; /* Unix time, seconds */
+	char owner[64]; /* the user who uploaded it; "" = the local admin */
 } srv_scene_row;
 
 /* Job states as stored; the wire names are the lower-case words. */
@@ -61,6 +62,7 @@ typedef struct srv_job_row {
 	int has_result;      /* a checkpoint exists (results/) */
 	char error[512];     /* failed: why */
 	double created, updated;
+	char owner[64]; /* the user who created it; "" = the local admin */
 } srv_job_row;
 
 /* Free the malloc'ed strings of a row (not the row itself). */
@@ -82,8 +84,9 @@ void srv_store_close(srv_store *st);
 const char *srv_store_repairs(const srv_store *st);
 
 /* Each returns 0, or -1 with msg filled (the daemon reports "io"). */
-int srv_store_scene_add(srv_store *st, const char *name, const void *bytes,
-                        size_t len, uint64_t *id, char *msg, size_t msglen);
+int srv_store_scene_add(srv_store *st, const char *name, const char *owner,
+                        const void *bytes, size_t len, uint64_t *id, char *msg,
+                        size_t msglen);
 /* Read a scene's bytes (malloc'ed, caller frees). */
 int srv_store_scene_read(srv_store *st, uint64_t id, unsigned char **bytes,
                          size_t *len, char *msg, size_t msglen);

@@ -48,24 +48,26 @@
 
 #define JOB_COLS                                                               \
 	"id, scene_id, name, options_json, target_json, eps_log_json, "        \
-	"stats_json, state, iterations, has_result, error, created, updated"
+	"stats_json, state, iterations, has_result, error, created, updated, " \
+	"owner"
 
 /* Every statement, prepared once at open (store_sql_prepare). */
 #define STMTS(X)                                                               \
 	X(BEGIN, "BEGIN IMMEDIATE")                                            \
 	X(COMMIT, "COMMIT")                                                    \
 	X(ROLLBACK, "ROLLBACK")                                                \
-	X(SCENE_INSERT, "INSERT INTO scenes(name, bytes, created) "            \
-	                "VALUES(?1, ?2, ?3)")                                  \
+	X(SCENE_INSERT, "INSERT INTO scenes(name, bytes, created, owner) "     \
+	                "VALUES(?1, ?2, ?3, ?4)")                              \
 	X(SCENE_GET, "SELECT bytes FROM scenes WHERE id = ?1")                 \
 	X(SCENE_DELETE, "DELETE FROM scenes WHERE id = ?1")                    \
-	X(SCENE_LIST, "SELECT id, name, bytes, created FROM scenes "           \
+	X(SCENE_LIST, "SELECT id, name, bytes, created, owner FROM scenes "    \
 	              "ORDER BY id")                                           \
 	X(SCENE_JOBS, "SELECT count(*) FROM jobs WHERE scene_id = ?1")         \
 	X(JOB_INSERT,                                                          \
 	  "INSERT INTO jobs(scene_id, name, options_json, target_json, "       \
 	  "eps_log_json, stats_json, state, iterations, error, created, "      \
-	  "updated) VALUES(?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11)")     \
+	  "updated, owner) "                                                   \
+	  "VALUES(?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12)")         \
 	X(JOB_UPDATE,                                                          \
 	  "UPDATE jobs SET target_json = ?2, eps_log_json = ?3, "              \
 	  "stats_json = ?4, state = ?5, iterations = ?6, error = ?7, "         \

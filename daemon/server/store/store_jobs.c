@@ -76,6 +76,7 @@ int srv_store_job_add(srv_store *st, srv_job_row *row, char *msg, size_t msglen)
 	bind_progress(s, 4, row);
 	sqlite3_bind_double(s, 10, row->created);
 	sqlite3_bind_double(s, 11, row->updated);
+	store_bind_text(s, 12, row->owner);
 	int rc = sqlite3_step(s);
 	sqlite3_reset(s);
 	if ((rc & 0xff) == SQLITE_CONSTRAINT)
@@ -226,6 +227,7 @@ static int job_from_row(sqlite3_stmt *s, srv_job_row *r)
 	store_col_copy(s, 10, r->error, sizeof(r->error));
 	r->created = sqlite3_column_double(s, 11);
 	r->updated = sqlite3_column_double(s, 12);
+	store_col_copy(s, 13, r->owner, sizeof(r->owner));
 	if (state < 0 || state >= SRV_JOB_NSTATES) { /* edited by hand */
 		r->state = SRV_JOB_FAILED;
 		snprintf(r->error, sizeof(r->error),

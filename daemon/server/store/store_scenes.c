@@ -25,8 +25,9 @@ int store_check_name(const char *what, const char *name, char *msg,
 	return 0;
 }
 
-int srv_store_scene_add(srv_store *st, const char *name, const void *bytes,
-                        size_t len, uint64_t *id, char *msg, size_t msglen)
+int srv_store_scene_add(srv_store *st, const char *name, const char *owner,
+                        const void *bytes, size_t len, uint64_t *id, char *msg,
+                        size_t msglen)
 {
 	char dir[PATHLEN], tmp[PATHLEN], path[PATHLEN];
 	if (store_check_name("scene", name, msg, msglen) < 0)
@@ -42,6 +43,7 @@ int srv_store_scene_add(srv_store *st, const char *name, const void *bytes,
 	store_bind_text(s, 1, name);
 	sqlite3_bind_int64(s, 2, (int64_t)len);
 	sqlite3_bind_double(s, 3, srv_now_unix());
+	store_bind_text(s, 4, owner ? owner : "");
 	if (store_run(st, s, "scene insert", msg, msglen) < 0)
 		goto bad_tx;
 	int64_t rowid = sqlite3_last_insert_rowid(st->db);
@@ -137,6 +139,7 @@ int srv_store_scene_list(srv_store *st,
 		store_col_copy(s, 1, r.name, sizeof(r.name));
 		r.bytes = (uint64_t)sqlite3_column_int64(s, 2);
 		r.created = sqlite3_column_double(s, 3);
+		store_col_copy(s, 4, r.owner, sizeof(r.owner));
 		fn(ud, &r);
 	}
 	sqlite3_reset(s);

@@ -4,7 +4,8 @@
  * row is trusted, and the schema with its versions.
  *
  * Schema versions: PRAGMA user_version (0 = empty database, 1 = scenes
- * and jobs, 2 = this layout: 1 plus the sensors added over the protocol).
+ * and jobs, 2 = 1 plus the sensors added over the protocol, 3 = this
+ * layout: 2 plus each scene's and job's owner).
  * An older database is brought up to date in one transaction at open; a
  * newer one is refused rather than misread.
  */
@@ -16,7 +17,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#define SCHEMA_VERSION 2
+#define SCHEMA_VERSION 3
 
 static const char schema_v1[] =
         "CREATE TABLE scenes("
@@ -52,6 +53,13 @@ static const char schema_v2[] =
         " nx REAL NOT NULL, ny REAL NOT NULL, nz REAL NOT NULL,"
         " PRIMARY KEY(job_id, name));"
         "PRAGMA user_version = 2;";
+
+/* 2 -> 3: scenes and jobs belong to the user who made them ("" = the
+ * local admin, which every row written before users existed is). */
+static const char schema_v3[] =
+        "ALTER TABLE scenes ADD COLUMN owner TEXT NOT NULL DEFAULT '';"
+        "ALTER TABLE jobs ADD COLUMN owner TEXT NOT NULL DEFAULT '';"
+        "PRAGMA user_version = 3;";
 
 /* One-value PRAGMA; its text result copied into out. */
 static int pragma(srv_store *st, const char *sql, char *out, size_t outlen,
@@ -100,7 +108,9 @@ static int upgrade(srv_store *st, long ver, char *msg, size_t msglen)
 	if (sqlite3_exec(st->db, "BEGIN", NULL, NULL, NULL) != SQLITE_OK ||
 	    (ver < 1 &&
 	     sqlite3_exec(st->db, schema_v1, NULL, NULL, &err) != SQLITE_OK) ||
-	    sqlite3_exec(st->db, schema_v2, NULL, NULL, &err) != SQLITE_OK ||
+	    (ver < 2 &&
+	     sqlite3_exec(st->db, schema_v2, NULL, NULL, &err) != SQLITE_OK) ||
+	    sqlite3_exec(st->db, schema_v3, NULL, NULL, &err) != SQLITE_OK ||
 	    sqlite3_exec(st->db, "COMMIT", NULL, NULL, NULL) != SQLITE_OK) {
 		srv_fail(msg, msglen,
 		         "%s: cannot bring the schema from version %ld to %d: "
