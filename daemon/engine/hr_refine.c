@@ -165,13 +165,12 @@ static rad_status refine_waves(rad_solver *sv, hr_state *st)
 /*
  * Without clusters every pair of polygons is a link to judge: O(n^2) form
  * factors, minutes for tens of thousands of polygons.  The rows are linked
- * in blocks of INIT_BLOCK_PAIRS pairs, and the cancel flag (cancel, pause,
+ * in blocks of WAVE_INIT_BLOCK_PAIRS pairs, and the cancel flag (cancel, pause,
  * time budget, shutdown) is looked at after each: a cancelled first step
  * returns RAD_ERR_CANCELLED with the rows done kept (st->init_row), and
  * the next step goes on from the next row.  A block judges its pairs at
  * once (wave.c), so the flag is seen within one block's form factors.
  */
-#define INIT_BLOCK_PAIRS (1u << 14)
 
 rad_status hr_initial_links(rad_solver *sv, hr_state *st)
 {
@@ -202,7 +201,7 @@ rad_status hr_initial_links(rad_solver *sv, hr_state *st)
 			if (i != j)
 				rs = push_pair(sv, &st->wave.todo, i, j, 0);
 		if (!rs &&
-		    (st->wave.todo.n >= INIT_BLOCK_PAIRS || i + 1 == n)) {
+		    (st->wave.todo.n >= WAVE_INIT_BLOCK_PAIRS || i + 1 == n)) {
 			rs = refine_waves(sv, st);
 			st->init_row = i + 1;
 			rad_solver_progress(sv, 0.8 * (i + 1) / n);

@@ -252,10 +252,22 @@ static rad_status rmb_step(rad_solver *sv, rad_error *err)
 	rmb_state *st = sv->impl;
 	rad_hier *h = &sv->h;
 	wave_step_begin(sv, &st->wave);
-	zero_I(h, RAD_TAG_CLUSTER);
-	for (uint32_t i = 0; i < sv->scene->npolys; i++)
-		zero_I(h, i);
+	/* A first step cancelled between rows resumes its gather. */
+	if (st->iter > 0 || st->init_row == 0) {
+		zero_I(h, RAD_TAG_CLUSTER);
+		for (uint32_t i = 0; i < sv->scene->npolys; i++)
+			zero_I(h, i);
+	}
 	rad_status rs = rmb_refine_gather(sv, st);
+	if (rs == RAD_ERR_CANCELLED) {
+		wave_release(sv, &st->wave); /* err, emax go on */
+		wave_step_end(sv, &st->wave, err);
+		return rad_fail(err, rs,
+		                "rmb: cancelled while linking every pair of "
+		                "polygons (%u of %u rows gathered); the next "
+		                "step goes on from there",
+		                st->init_row, sv->scene->npolys);
+	}
 	release_scratch(sv, st);
 	if (rs)
 		return wave_failed(sv, rs, err);

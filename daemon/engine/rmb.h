@@ -36,14 +36,17 @@ typedef struct rmb_state {
 	float *arefl;             /* per cluster id: area that reflects */
 	float *rhomax;            /* per cluster id: largest reflectance */
 	uint32_t ncl;
-	uint32_t iter;    /* iterations done */
-	double mean_dB;   /* area-mean photopic dB after the last update */
-	double mean_B;    /* ... and B */
-	double chg[3][3]; /* sum A |dB| per channel, last three steps */
-	double q[3];      /* the tail jump's rates (tail_jump) */
-	double qmax;      /* ... the largest */
-	int jumped;       /* tail_jump done */
-	rmb_set deleted;  /* study: pairs deleted so far */
+	uint32_t iter;     /* iterations done */
+	uint32_t init_row; /* without clustering: rows of polygon pairs the
+	                      first walk has gathered; a cancelled first step
+	                      goes on from the next one */
+	double mean_dB;    /* area-mean photopic dB after the last update */
+	double mean_B;     /* ... and B */
+	double chg[3][3];  /* sum A |dB| per channel, last three steps */
+	double q[3];       /* the tail jump's rates (tail_jump) */
+	double qmax;       /* ... the largest */
+	int jumped;        /* tail_jump done */
+	rmb_set deleted;   /* study: pairs deleted so far */
 	/* Receiver accuracy (rcv_too_coarse, rmb_refine.c), by element id:
 	 * cut   links at least this error (a fraction of the limit) go to
 	 *       the receiver's children; 0 = none.  Sticky, ELEM_SURFACE.

@@ -585,19 +585,26 @@ static rad_status first_walk(rad_solver *sv, rmb_state *st)
 		if (!rs)
 			rs = walk_roots(sv, st, ids.v, ids.n);
 	} else {
-		/* Every pair of polygons, in blocks of rows. */
+		/* Every pair of polygons, in blocks of rows.  The cancel flag
+		 * is looked at after each block: the rows gathered so far
+		 * stay gathered (I, err, emax and the roots kept), and the
+		 * next step goes on from st->init_row (rmb_step). */
 		uint32_t n = s->npolys;
-		for (uint32_t i = 0; i < n && !rs; i++) {
+		for (uint32_t i = st->init_row; i < n && !rs; i++) {
 			for (uint32_t l = 0; l < s->nlights && !rs; l++)
 				rs = new_root(sv, i, l | RAD_TAG_LIGHT, &ids);
 			for (uint32_t j = 0; j < n && !rs; j++)
 				if (i != j)
 					rs = new_root(sv, i, j, &ids);
-			if (!rs && (st->wave.todo.n >= WAVE_BLOCK_PAIRS ||
+			if (!rs && (st->wave.todo.n >= WAVE_INIT_BLOCK_PAIRS ||
 			            i + 1 == n)) {
 				rs = walk_roots(sv, st, ids.v, ids.n);
 				ids.n = 0;
+				st->init_row = i + 1;
 				rad_solver_progress(sv, 0.8 * (i + 1) / n);
+				if (!rs && i + 1 < n &&
+				    rad_solver_cancelled(sv))
+					rs = RAD_ERR_CANCELLED;
 			}
 		}
 	}
@@ -665,6 +672,8 @@ static rad_status mark_cuts(rad_solver *sv, rmb_state *st, uint32_t id,
 rad_status rmb_refine_gather(rad_solver *sv, rmb_state *st)
 {
 	rad_status rs = st->iter == 0 ? first_walk(sv, st) : next_walk(sv, st);
+	if (rs == RAD_ERR_CANCELLED)
+		return rs; /* a first walk cut between rows: not finished */
 	for (uint32_t i = 0; !rs && i < sv->scene->npolys; i++)
 		rs = mark_cuts(sv, st, i, 0);
 	return rs;

@@ -55,6 +55,11 @@ typedef rad_status (*wave_apply_fn)(rad_solver *sv, const void *item,
 /* Items handed to the waves at once (polygon pairs without clustering,
  * rmb's stored roots), so that their lists stay bounded. */
 #define WAVE_BLOCK_PAIRS (1u << 20)
+/* Without clustering, the first step links every pair of polygons in
+ * blocks of this many pairs and looks at the cancel flag after each, so
+ * that a cancel, pause, time budget or shutdown is seen within one
+ * block's form factors (hr_initial_links, rmb's first walk). */
+#define WAVE_INIT_BLOCK_PAIRS (1u << 14)
 
 /* Set up w for items of item_size bytes; RAD_ERR_NOMEM on failure. */
 rad_status wave_init(rad_solver *sv, rad_wave *w, size_t item_size);

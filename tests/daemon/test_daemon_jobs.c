@@ -860,10 +860,10 @@ static void run_a_while(dm_conn *c, json_t *job)
 }
 
 /* A new hr job on sc with clustering off, one thread. */
-static json_t *unclustered_job(dm_conn *c, const json_t *sc)
+static json_t *unclustered_job(dm_conn *c, const json_t *sc, const char *solver)
 {
 	json_t *opt = json_pack("{s:i, s:b}", "threads", 1, "clustering", 0);
-	json_t *job = dm_job_create(c, sc, "hr", opt);
+	json_t *job = dm_job_create(c, sc, solver, opt);
 	json_decref(opt);
 	return job;
 }
@@ -879,27 +879,36 @@ static void test_unclustered_job_stops_when_asked(void **state)
 	                                         "box --subdiv 40 --rho 0.5",
 	                                         path, sizeof(path)),
 	                            "box40");
-	json_t *job = unclustered_job(c, sc);
-	run_a_while(c, job);
-	json_decref(timed(c, "job.pause", "job.pause", job, "paused"));
-	json_decref(dm_wait_job(c, job, "paused", 10000));
+	static const char *const solvers[] = {"hr", "rmb"};
+	json_t *job;
+	double t0;
+	for (int k = 0; k < 2; k++) {
+		print_message("%s:\n", solvers[k]);
+		job = unclustered_job(c, sc, solvers[k]);
+		run_a_while(c, job);
+		json_decref(timed(c, "job.pause", "job.pause", job, "paused"));
+		json_decref(dm_wait_job(c, job, "paused", 10000));
 
-	/* A budget of half a second, spent within the first iteration. */
-	double t0 = dm_now_ms();
-	json_decref(dm_ok(c, "{s:s, s:O, s:f}", "cmd", "job.run", "job", job,
-	                  "seconds", 0.5));
-	json_t *j = dm_wait_job(c, job, "paused", 10000);
-	print_message("seconds 0.5: paused after %.0f ms\n", dm_now_ms() - t0);
-	assert_int_equal(dm_int(j, "iteration"), 0);
-	json_decref(j);
+		/* A budget of half a second, spent within the first
+		 * iteration. */
+		t0 = dm_now_ms();
+		json_decref(dm_ok(c, "{s:s, s:O, s:f}", "cmd", "job.run", "job",
+		                  job, "seconds", 0.5));
+		json_t *j = dm_wait_job(c, job, "paused", 10000);
+		print_message("seconds 0.5: paused after %.0f ms\n",
+		              dm_now_ms() - t0);
+		assert_int_equal(dm_int(j, "iteration"), 0);
+		json_decref(j);
 
-	run_a_while(c, job);
-	json_decref(timed(c, "job.cancel", "job.cancel", job, "cancelled"));
-	json_decref(dm_wait_job(c, job, "cancelled", 10000));
-	json_decref(job);
+		run_a_while(c, job);
+		json_decref(
+		        timed(c, "job.cancel", "job.cancel", job, "cancelled"));
+		json_decref(dm_wait_job(c, job, "cancelled", 10000));
+		json_decref(job);
+	}
 
 	/* A second such job running when the daemon is told to stop. */
-	job = unclustered_job(c, sc);
+	job = unclustered_job(c, sc, "rmb");
 	run_a_while(c, job);
 	t0 = dm_now_ms();
 	dm_signal(d, SIGTERM);

@@ -689,12 +689,12 @@ static void raise_cancel(void *ud, double fraction)
 	}
 }
 
-static rad_solver *unclustered_hr(const rad_scene *s, volatile int *flag,
-                                  raise_at_first *r)
+static rad_solver *unclustered(rad_solver_kind kind, const rad_scene *s,
+                               volatile int *flag, raise_at_first *r)
 {
 	rad_options o;
 	rad_options_default(&o);
-	o.solver = RAD_SOLVER_HR;
+	o.solver = kind;
 	o.clustering = 0;
 	o.threads = 2;
 	o.cancel = flag;
@@ -708,52 +708,68 @@ static rad_solver *unclustered_hr(const rad_scene *s, volatile int *flag,
 	return sv;
 }
 
+/*
+ * hr and rmb without clustering: a first step cancelled between blocks of
+ * polygon pairs returns RAD_ERR_CANCELLED, and the steps after it give
+ * the same links and lux, to the bit, as an uncancelled solve (the block
+ * under way when the flag rose was finished, so nothing was cut short).
+ * On box 40 (57.6 M pairs) the step comes back within seconds of the
+ * flag, not minutes.
+ */
 static void test_unclustered_first_step_stops_on_cancel(void **state)
 {
 	(void)state;
-	rad_error err;
-	rad_stats a, b;
+	static const rad_solver_kind kinds[] = {RAD_SOLVER_HR, RAD_SOLVER_RMB};
 	static const double pts[2][6] = {{0.5, 0.01, 0.5, 0, 1, 0},
 	                                 {0.01, 0.3, 0.7, 1, 0, 0}};
-	double lux_a[2], lux_b[2];
+	for (int k = 0; k < 2; k++) {
+		rad_error err;
+		rad_stats a, b;
+		double lux_a[2], lux_b[2];
+		const char *name = rad_solver_kind_name(kinds[k]);
+		rad_scene *s = generated_scene("box --subdiv 8 --rho 0.5");
+		volatile int flag = 0;
+		rad_solver *sv = unclustered(kinds[k], s, &flag, NULL);
+		for (int i = 0; i < 3; i++)
+			assert_int_equal(rad_solver_step(sv, &err), RAD_OK);
+		rad_solver_stats(sv, &a);
+		assert_int_equal(
+		        rad_solver_illuminance(sv, &pts[0][0], 2, lux_a, &err),
+		        RAD_OK);
+		rad_solver_free(sv);
 
-	rad_scene *s = generated_scene("box --subdiv 8 --rho 0.5");
-	volatile int flag = 0;
-	rad_solver *sv = unclustered_hr(s, &flag, NULL);
-	for (int k = 0; k < 3; k++)
-		assert_int_equal(rad_solver_step(sv, &err), RAD_OK);
-	rad_solver_stats(sv, &a);
-	assert_int_equal(rad_solver_illuminance(sv, &pts[0][0], 2, lux_a, &err),
-	                 RAD_OK);
-	rad_solver_free(sv);
+		raise_at_first r = {&flag, 0, 0};
+		sv = unclustered(kinds[k], s, &flag, &r);
+		assert_int_equal(rad_solver_step(sv, &err), RAD_ERR_CANCELLED);
+		print_message("%s, box 8: %s\n", name, err.msg);
+		flag = 0;
+		for (int i = 0; i < 3; i++)
+			assert_int_equal(rad_solver_step(sv, &err), RAD_OK);
+		rad_solver_stats(sv, &b);
+		assert_int_equal(
+		        rad_solver_illuminance(sv, &pts[0][0], 2, lux_b, &err),
+		        RAD_OK);
+		assert_int_equal(a.links, b.links);
+		assert_int_equal(a.iteration, b.iteration);
+		if (!(lux_a[0] == lux_b[0] && lux_a[1] == lux_b[1]))
+			fail_msg("%s: %.17g %.17g after a cancel, %.17g %.17g "
+			         "without",
+			         name, lux_b[0], lux_b[1], lux_a[0], lux_a[1]);
+		rad_solver_free(sv);
+		rad_scene_free(s);
 
-	raise_at_first r = {&flag, 0, 0};
-	sv = unclustered_hr(s, &flag, &r);
-	assert_int_equal(rad_solver_step(sv, &err), RAD_ERR_CANCELLED);
-	print_message("box 8: %s\n", err.msg);
-	flag = 0;
-	for (int k = 0; k < 3; k++)
-		assert_int_equal(rad_solver_step(sv, &err), RAD_OK);
-	rad_solver_stats(sv, &b);
-	assert_int_equal(rad_solver_illuminance(sv, &pts[0][0], 2, lux_b, &err),
-	                 RAD_OK);
-	assert_int_equal(a.links, b.links);
-	assert_int_equal(a.iteration, b.iteration);
-	assert_true(lux_a[0] == lux_b[0] && lux_a[1] == lux_b[1]);
-	rad_solver_free(sv);
-	rad_scene_free(s);
-
-	s = generated_scene("box --subdiv 40 --rho 0.5");
-	flag = 0;
-	r = (raise_at_first){&flag, 0, 0};
-	sv = unclustered_hr(s, &flag, &r);
-	assert_int_equal(rad_solver_step(sv, &err), RAD_ERR_CANCELLED);
-	double late = rad_seconds() - r.raised_at;
-	print_message("box 40: back %.3f s after the flag: %s\n", late,
-	              err.msg);
-	assert_true(late < 10);
-	rad_solver_free(sv);
-	rad_scene_free(s);
+		s = generated_scene("box --subdiv 40 --rho 0.5");
+		flag = 0;
+		r = (raise_at_first){&flag, 0, 0};
+		sv = unclustered(kinds[k], s, &flag, &r);
+		assert_int_equal(rad_solver_step(sv, &err), RAD_ERR_CANCELLED);
+		double late = rad_seconds() - r.raised_at;
+		print_message("%s, box 40: back %.3f s after the flag: %s\n",
+		              name, late, err.msg);
+		assert_true(late < 10);
+		rad_solver_free(sv);
+		rad_scene_free(s);
+	}
 }
 
 int main(void)
