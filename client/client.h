@@ -61,6 +61,8 @@ enum {
 	  "daemon address [$LUXRAD_CONNECT, 127.0.0.1:7420]")                  \
 	X(TOKEN_FILE, "token-file", 1, "FILE",                                 \
 	  "token [$LUXRAD_TOKEN_FILE, $LUXRAD_TOKEN]")                         \
+	X(TLS_CA, "tls-ca", 1, "FILE",                                         \
+	  "CA certificates for a tls: address [$LUXRAD_TLS_CA, the system's]") \
 	X(NAME, "name", 1, "NAME", "a name for the scene or job")              \
 	X(SOLVE, "solve", 0, NULL,                                             \
 	  "also create a job and run it to convergence")                       \
@@ -119,6 +121,8 @@ extern const lx_opt_row lx_opt_table[LX_OPT_COUNT];
 /* The connection to the daemon (net.c). */
 typedef struct lx_conn {
 	int fd;               /* -1 when closed */
+	void *ssl;            /* OpenSSL's SSL (tls: addresses), or NULL */
+	void *ssl_ctx;        /* ... and its SSL_CTX */
 	unsigned char *buf;   /* receive buffer */
 	size_t off, len, cap; /* consumed / filled / allocated */
 	size_t pending; /* bytes of the last frame, consumed on next read */

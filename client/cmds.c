@@ -204,8 +204,8 @@ int lx_cmd_submit(lx_ctx *cx)
 {
 	const uint64_t create_only =
 	        ~(LX_BIT(HELP) | LX_BIT(JSON) | LX_BIT(CONNECT) |
-	          LX_BIT(TOKEN_FILE) | LX_BIT(NAME) | LX_BIT(SOLVE) |
-	          LX_BIT(LUMINAIRE));
+	          LX_BIT(TOKEN_FILE) | LX_BIT(TLS_CA) | LX_BIT(NAME) |
+	          LX_BIT(SOLVE) | LX_BIT(LUMINAIRE));
 	char name[256];
 	unsigned char *data = NULL;
 	size_t len = 0;

@@ -19,7 +19,8 @@
 #include "client.h"
 
 #define GLOBAL_OPTS                                                            \
-	(LX_BIT(HELP) | LX_BIT(JSON) | LX_BIT(CONNECT) | LX_BIT(TOKEN_FILE))
+	(LX_BIT(HELP) | LX_BIT(JSON) | LX_BIT(CONNECT) | LX_BIT(TOKEN_FILE) |  \
+	 LX_BIT(TLS_CA))
 #define CREATE_OPTS (LX_BIT(NAME) | LX_BIT(SOLVER) | LX_ENGINE_BITS)
 
 typedef struct cmd_def {
@@ -193,6 +194,7 @@ static void print_common(void)
 	printf("\nCommon options:\n");
 	print_option(LX_OPT_CONNECT);
 	print_option(LX_OPT_TOKEN_FILE);
+	print_option(LX_OPT_TLS_CA);
 	print_option(LX_OPT_JSON);
 	print_option(LX_OPT_HELP);
 }
@@ -210,7 +212,10 @@ static void help_main(void)
 	       "Address (--connect, else $LUXRAD_CONNECT, else %s):\n"
 	       "  HOST:PORT, HOST (port %d), [V6]:PORT, tcp:HOST:PORT,\n"
 	       "  unix:PATH or a path starting with '/' or '.' (Unix "
-	       "socket).\n"
+	       "socket);\n"
+	       "  tls://HOST:PORT: TLS, the daemon's certificate checked "
+	       "against\n  --tls-ca FILE, else $LUXRAD_TLS_CA, else the "
+	       "system's CAs, and HOST.\n"
 	       "Token (sent when given): --token-file FILE, else "
 	       "$LUXRAD_TOKEN_FILE,\nelse $LUXRAD_TOKEN. A daemon listening "
 	       "beyond loopback requires one.\n\n"

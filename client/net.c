@@ -17,6 +17,8 @@
  */
 #include <errno.h>
 #include <netdb.h>
+#include <openssl/err.h>
+#include <openssl/ssl.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -101,6 +103,50 @@ static int connect_tcp(lx_conn *c, const rp_addr *a)
 		                  "cannot connect: %s (is luxradd running? "
 		                  "see --connect)",
 		                  strerror(e));
+	return LX_EXIT_OK;
+}
+
+/*
+ * TLS over the connected socket (a tls: address): TLS 1.2 at least, the
+ * daemon's certificate verified against --tls-ca, $LUXRAD_TLS_CA or the
+ * system's CAs, and against the address's host name or IP literal.
+ */
+static int start_tls(lx_ctx *cx, lx_conn *c, const rp_addr *a)
+{
+	const char *ca = cx->val[LX_OPT_TLS_CA];
+	if (!ca || !*ca)
+		ca = getenv("LUXRAD_TLS_CA");
+	SSL_CTX *ctx = SSL_CTX_new(TLS_client_method());
+	SSL *ssl = NULL;
+	char why[256] = "";
+	int ok = ctx && SSL_CTX_set_min_proto_version(ctx, TLS1_2_VERSION);
+	if (ok)
+		ok = ca && *ca ? SSL_CTX_load_verify_locations(ctx, ca, NULL)
+		               : SSL_CTX_set_default_verify_paths(ctx);
+	if (ok) {
+		SSL_CTX_set_verify(ctx, SSL_VERIFY_PEER, NULL);
+		ssl = SSL_new(ctx);
+		ok = ssl && SSL_set_fd(ssl, c->fd) == 1 &&
+		     SSL_set1_host(ssl, a->host) == 1 &&
+		     SSL_set_tlsext_host_name(ssl, a->host) == 1 &&
+		     SSL_connect(ssl) == 1;
+	}
+	if (!ok) {
+		unsigned long e = ERR_get_error();
+		long v = ssl ? SSL_get_verify_result(ssl) : X509_V_OK;
+		if (v != X509_V_OK)
+			snprintf(why, sizeof why, "%s",
+			         X509_verify_cert_error_string(v));
+		else if (e)
+			ERR_error_string_n(e, why, sizeof why);
+		SSL_free(ssl);
+		SSL_CTX_free(ctx);
+		return conn_error(c, "TLS: %s%s%s%s", why[0] ? why : "failed",
+		                  ca && *ca ? " (CA file " : "",
+		                  ca && *ca ? ca : "", ca && *ca ? ")" : "");
+	}
+	c->ssl = ssl;
+	c->ssl_ctx = ctx;
 	return LX_EXIT_OK;
 }
 
@@ -206,11 +252,15 @@ int lx_open(lx_ctx *cx)
 	rp_limits_default(&c->lim);
 	c->lim.max_header_bytes = LX_MAX_REPLY_HEADER;
 	snprintf(c->where, sizeof c->where, "%s %.250s",
-	         a.kind == RP_ADDR_UNIX ? "unix" : "tcp",
+	         a.kind == RP_ADDR_UNIX ? "unix"
+	         : a.tls                ? "tls"
+	                                : "tcp",
 	         a.kind == RP_ADDR_UNIX ? a.path : text);
 	if ((rc = read_token(cx, &token)) != 0)
 		return rc;
 	rc = a.kind == RP_ADDR_UNIX ? connect_unix(c, &a) : connect_tcp(c, &a);
+	if (rc == LX_EXIT_OK && a.tls)
+		rc = start_tls(cx, c, &a);
 	if (rc == LX_EXIT_OK) {
 		cx->connected = 1;
 		rc = say_hello(cx, token);
@@ -228,6 +278,12 @@ void lx_close(lx_ctx *cx)
 
 	if (!cx->connected)
 		return;
+	if (c->ssl) {
+		SSL_shutdown(c->ssl);
+		SSL_free(c->ssl);
+		SSL_CTX_free(c->ssl_ctx);
+		c->ssl = c->ssl_ctx = NULL;
+	}
 	if (c->fd >= 0)
 		close(c->fd);
 	c->fd = -1;
@@ -245,7 +301,15 @@ static int send_all(lx_conn *c, const void *data, size_t len)
 	const unsigned char *p = data;
 
 	while (len > 0) {
-		ssize_t n = send(c->fd, p, len, MSG_NOSIGNAL);
+		ssize_t n;
+		if (c->ssl) {
+			size_t put = 0;
+			n = SSL_write_ex(c->ssl, p, len, &put) == 1
+			            ? (ssize_t)put
+			            : -1;
+		} else {
+			n = send(c->fd, p, len, MSG_NOSIGNAL);
+		}
 		if (n < 0 && errno == EINTR)
 			continue;
 		if (n <= 0)
@@ -297,7 +361,24 @@ static int read_frame(lx_conn *c, rp_frame *f)
 			                  rp_err_name(err.code), err.msg);
 		if (make_room(c) != 0)
 			return LX_EXIT_CONN;
-		ssize_t n = recv(c->fd, c->buf + c->len, c->cap - c->len, 0);
+		ssize_t n;
+		if (c->ssl) {
+			size_t got = 0;
+			int r = SSL_read_ex(c->ssl, c->buf + c->len,
+			                    c->cap - c->len, &got);
+			int e = r == 1 ? SSL_ERROR_NONE
+			               : SSL_get_error(c->ssl, r);
+			n = r == 1 ? (ssize_t)got
+			    : e == SSL_ERROR_ZERO_RETURN ||
+			                    (e == SSL_ERROR_SYSCALL &&
+			                     errno == 0)
+			            ? 0
+			            : -1;
+			if (n < 0 && e != SSL_ERROR_SYSCALL)
+				errno = EPROTO;
+		} else {
+			n = recv(c->fd, c->buf + c->len, c->cap - c->len, 0);
+		}
 		if (n < 0 && errno == EINTR)
 			continue;
 		if (n == 0)

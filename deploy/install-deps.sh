@@ -21,13 +21,16 @@ set -euo pipefail
 # glTF validator; Blender (with its bundled glTF exporter) makes the
 # scenes test_blender and tests/bench/textured_interior.sh export at run
 # time.
-# libssl-dev: OpenSSL's libcrypto hashes the users' tokens (SHA-256).
+# libssl-dev: OpenSSL, for TLS on the protocol listener and the users'
+# token hashes (SHA-256); openssl, the command, makes test_daemon_tls's
+# certificates and is its s_client.
 # python3-serial-asyncio is only a Recommends of python3-pymodbus, but
 # `import pymodbus.client` fails without it, so it is listed explicitly.
 PACKAGES=(
 	build-essential cmake ninja-build pkg-config clang-format
 	libembree-dev libtinygltf-dev libmodbus-dev libcmocka-dev
 	libjansson-dev libsqlite3-dev libpng-dev libjpeg62-turbo-dev libssl-dev
+	openssl
 	mbpoll gnuplot-nox python3 python3-pymodbus python3-serial-asyncio
 	python3-numpy python3-pil
 	nodejs npm chromium blender

@@ -285,6 +285,7 @@ typedef struct rp_addr {
 	rp_addr_kind kind;
 	char host[256]; /* TCP: host name or literal, without brackets */
 	uint16_t port;  /* TCP */
+	int tls;        /* TCP: "tls:" or "tls://" given (connect only) */
 	char path[108]; /* Unix: sun_path */
 } rp_addr;
 

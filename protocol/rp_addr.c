@@ -9,6 +9,8 @@
  *   unix:PATH         a Unix socket (any non-empty path)
  *   /abs/path, ./rel  a Unix socket (text starting with '/' or '.')
  *   tcp:HOST:PORT     TCP; "tcp:" may prefix every TCP form below
+ *   tls:HOST:PORT     TCP with TLS (also tls://HOST:PORT): the same forms
+ *                     after the prefix; to connect only
  *   HOST:PORT         TCP, HOST a name or an IPv4 literal
  *   HOST              TCP on RP_DEFAULT_PORT
  *   [V6]:PORT, [V6]   TCP, an IPv6 literal in brackets
@@ -192,9 +194,25 @@ static int parse(const char *text, addr_use use, rp_addr *out, rp_error *err)
 	if (path) {
 		if (parse_unix(path, text, &a, err) != 0)
 			return -1;
-	} else if (parse_tcp(strncmp(text, "tcp:", 4) == 0 ? text + 4 : text,
-	                     use, text, &a, err) != 0) {
-		return -1;
+	} else {
+		const char *t = text;
+		if (strncmp(t, "tls://", 6) == 0 ||
+		    strncmp(t, "tls:", 4) == 0) {
+			if (use == FOR_LISTEN) {
+				rp_fail(err, RP_ERR_BAD_REQUEST,
+				        "address '%.200s': a listener speaks "
+				        "TLS "
+				        "by the tls key, not a prefix",
+				        text);
+				return -1;
+			}
+			a.tls = 1;
+			t += t[4] == '/' ? 6 : 4;
+		} else if (strncmp(t, "tcp:", 4) == 0) {
+			t += 4;
+		}
+		if (parse_tcp(t, use, text, &a, err) != 0)
+			return -1;
 	}
 	*out = a;
 	return 0;

@@ -306,6 +306,28 @@ static void test_address_errors(void **state)
 	expect_addr_error(host, "255");
 }
 
+/* tls: and tls:// mark TCP with TLS, to connect only. */
+static void test_address_tls(void **state)
+{
+	(void)state;
+	rp_addr a;
+	rp_error e;
+	static const char *const forms[] = {"tls://127.0.0.1:7420",
+	                                    "tls:127.0.0.1:7420",
+	                                    "tls://[::1]:7420", "tls://h"};
+	for (size_t i = 0; i < sizeof(forms) / sizeof(forms[0]); i++) {
+		assert_int_equal(rp_addr_parse(forms[i], &a, &e), 0);
+		assert_int_equal(a.kind, RP_ADDR_TCP);
+		assert_int_equal(a.tls, 1);
+	}
+	assert_int_equal(rp_addr_parse("tcp:h:7420", &a, &e), 0);
+	assert_int_equal(a.tls, 0);
+	expect_tcp_by(rp_addr_parse, "tls://host.lan:7000", "host.lan", 7000);
+	expect_error_by(rp_addr_parse_listen, "tls://0.0.0.0:7420",
+	                "speaks TLS by the tls key");
+	expect_addr_error("tls://", "empty host");
+}
+
 /* Listeners: a port is required, 0 is "any free port", no Unix socket. */
 static void test_address_listen(void **state)
 {
@@ -590,6 +612,7 @@ int main(void)
 	        cmocka_unit_test(test_arg_points),
 	        cmocka_unit_test(test_address_forms),
 	        cmocka_unit_test(test_address_errors),
+	        cmocka_unit_test(test_address_tls),
 	        cmocka_unit_test(test_address_listen),
 	        cmocka_unit_test(test_address_loopback),
 	        cmocka_unit_test(test_token_compare),

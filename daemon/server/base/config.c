@@ -80,6 +80,15 @@ static const cfg_key keys[] = {
          "/etc/luxradd/users",
          "named tokens with roles, one \"NAME ROLE sha256:HEX\" per line "
          "(luxradd user-add writes them); none = no users"},
+        {"tls", K_TLS, F(tls), 0, 0, "MODE", "all",
+         "TLS on TCP listeners: auto = those beyond loopback (they then need "
+         "a certificate), all = every one, off = none (tokens in clear "
+         "text)"},
+        {"tls_cert_file", K_FILE, F(tls_cert_file), 0, 0, "FILE",
+         "/etc/luxradd/cert.pem",
+         "the server's certificate chain, PEM, leaf first; none = no TLS"},
+        {"tls_key_file", K_FILE, F(tls_key_file), 0, 0, "FILE",
+         "/etc/luxradd/key.pem", "the certificate's private key, PEM"},
         {"require_token", K_BOOL, F(require_token), 0, 1, "BOOL", "yes",
          "ask for the token on loopback and Unix connections too"},
         {"workers", K_INT, F(workers), 1, 256, "N", "4",
@@ -153,6 +162,7 @@ const cfg_key *cfg_keys(size_t *n)
 }
 
 static const char *const level_names[] = {"error", "warn", "info", "debug"};
+static const char *const tls_names[] = {"auto", "all", "off"};
 
 /* ------------------------------------------------------------- defaults */
 
@@ -436,6 +446,12 @@ int cfg_set_value(srv_config *c, const cfg_key *k, const char *v, char *msg,
 		        msg, msglen,
 		        "'%s' is not a log level (error, warn, info, debug)",
 		        v);
+	case K_TLS:
+		for (int i = 0; i < 3; i++)
+			if (strcasecmp(v, tls_names[i]) == 0)
+				return *(srv_tls_mode *)p = (srv_tls_mode)i, 0;
+		return srv_fail(msg, msglen,
+		                "'%s' is not a TLS mode (auto, all, off)", v);
 	case K_MODBUS:
 		return mb_config_set(&c->modbus, k->name, v, msg, msglen);
 	default:
@@ -530,6 +546,9 @@ void cfg_fmt_value(const srv_config *c, const cfg_key *k, char *buf, size_t len)
 	case K_LEVEL:
 		snprintf(buf, len, "%s",
 		         level_names[*(const srv_log_level *)p]);
+		break;
+	case K_TLS:
+		snprintf(buf, len, "%s", tls_names[*(const srv_tls_mode *)p]);
 		break;
 	case K_SIZE: {
 		uint64_t n = *(const size_t *)p;

@@ -23,6 +23,13 @@ typedef enum srv_log_level {
 	SRV_LOG_DEBUG
 } srv_log_level;
 
+/* Which TCP protocol listeners speak TLS (cmd/tls.c). */
+typedef enum srv_tls_mode {
+	SRV_TLS_AUTO, /* those beyond loopback (then a certificate is needed) */
+	SRV_TLS_ALL,  /* every one, loopback too */
+	SRV_TLS_OFF   /* none: tokens beyond loopback travel in clear text */
+} srv_tls_mode;
+
 typedef struct srv_config {
 	char config_file[4096];   /* "" = none (embedded defaults only) */
 	char listen_tcp[300];     /* host:port, "" = no TCP; default
@@ -39,6 +46,9 @@ typedef struct srv_config {
 	                             for root */
 	char token_file[4096];    /* "" = no token */
 	char users_file[4096];    /* "" = no users (cmd/users.c) */
+	srv_tls_mode tls;         /* which TCP listeners speak TLS */
+	char tls_cert_file[4096]; /* PEM chain, leaf first; "" = none */
+	char tls_key_file[4096];  /* PEM private key; "" = none */
 	int require_token;        /* 1: token even on loopback / Unix */
 	int workers;              /* jobs solved at once; default 2 */
 	int solver_threads;       /* engine threads per job; 0 = cores /

@@ -23,6 +23,7 @@ typedef enum key_type {
 	K_SECONDS, /* double seconds within [lo, hi], s/m/h suffixes */
 	K_REAL,    /* double within [lo, hi] */
 	K_LEVEL,   /* srv_log_level */
+	K_TLS,     /* srv_tls_mode: auto, all, off */
 	K_MODBUS,  /* a modbus_* key: parsed and printed by mb_config_* */
 } key_type;
 

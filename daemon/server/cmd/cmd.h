@@ -28,6 +28,7 @@
 #include <jansson.h>
 #include <stddef.h>
 #include <stdint.h>
+#include <sys/types.h>
 
 #include "core.h"
 #include "loop.h"
@@ -36,6 +37,8 @@
 
 typedef struct cmd_server cmd_server;
 typedef struct cmd_conn cmd_conn;
+typedef struct ssl_st SSL;          /* OpenSSL's, for tls.c */
+typedef struct ssl_ctx_st SSL_CTX;
 
 /* ------------------------------------------------------------ connections */
 
@@ -59,6 +62,8 @@ struct cmd_conn {
 	int fd;
 	int listener_tcp;  /* accepted on TCP (else Unix) */
 	int needs_token;   /* hello must carry the token */
+	SSL *ssl;          /* TLS session (tls.c); NULL on plain sockets */
+	int tls_ready;     /* the TLS handshake is done */
 	int authed;        /* hello accepted */
 	char peer[128];    /* for logs */
 	unsigned char *in; /* input buffer */
@@ -90,6 +95,25 @@ struct cmd_conn {
 };
 
 /* ------------------------------------------------------------------ users */
+
+/* ------------------------------------------------------------------- TLS */
+
+/* The server context from tls_cert_file / tls_key_file (none: NULL);
+ * -1 with msg, the old context kept. */
+int cmd_tls_load(cmd_server *d, const srv_config *cfg, char *msg,
+                 size_t msglen);
+void cmd_tls_free(cmd_server *d);
+/* A server-side TLS session on fd; NULL when it cannot be made. */
+SSL *cmd_tls_new(cmd_server *d, int fd);
+/* 1 done, 0 call again when the socket is ready, -1 failed (why). */
+int cmd_tls_handshake(SSL *ssl, char *why, size_t len);
+/* As read(2) / write(2); errno EAGAIN when OpenSSL wants the socket. */
+ssize_t cmd_tls_read(SSL *ssl, void *buf, size_t len);
+ssize_t cmd_tls_write(SSL *ssl, const void *buf, size_t len);
+/* 1 if OpenSSL holds decrypted bytes not yet read. */
+int cmd_tls_pending(SSL *ssl);
+/* Send close_notify once, if the handshake was done. */
+void cmd_tls_close_notify(SSL *ssl);
 
 #define CMD_USER_NAME_MAX 64
 
@@ -142,7 +166,7 @@ const char *cmd_refusal_name(cmd_refusal r);
 cmd_conn *cmd_conn_find(cmd_server *d, uint64_t id);
 /* The spare descriptor (cmd_server_listen); -1 when none can be had. */
 int cmd_conn_init(cmd_server *d);
-void cmd_conn_accept(cmd_server *d, int lfd, int tcp, int needs_token);
+void cmd_conn_accept(cmd_server *d, int lfd, int tcp, int needs_token, int tls);
 /* Queue bytes (ownership of buf taken); flushes what the socket takes. */
 int cmd_conn_send(cmd_server *d, cmd_conn *c, unsigned char *buf, size_t len);
 /* Encode and queue a JSON frame (header not stolen). */
@@ -158,6 +182,9 @@ void cmd_conn_close_after_flush(cmd_server *d, cmd_conn *c);
 /* A deferred reply was delivered: process buffered frames. */
 void cmd_conn_unbusy(cmd_server *d, cmd_conn *c);
 void cmd_conn_free_all(cmd_server *d);
+/* Read what OpenSSL holds decrypted on connections that may read (the
+ * socket no longer signals it); at the end of every loop turn. */
+void cmd_conn_tls_pending(cmd_server *d);
 /* Close dead connections (I/O thread, end of a loop turn). */
 void cmd_conn_reap(cmd_server *d);
 /* Idle connections, stuck flushes (end of every loop turn). */
@@ -310,6 +337,7 @@ typedef struct cmd_listener {
 	int fd;
 	int kind;        /* 0 tcp, 1 unix, 2 metrics */
 	int needs_token; /* tcp beyond loopback */
+	int tls;         /* protocol over TLS (tls.c) */
 	char text[4200]; /* "tcp HOST:PORT" line for luxradd.addr */
 } cmd_listener;
 
@@ -336,7 +364,8 @@ struct cmd_server {
 	size_t token_len;
 	cmd_user *users; /* the users file (users.c) */
 	int nusers;
-	int users_on; /* a users file is configured */
+	int users_on;     /* a users file is configured */
+	SSL_CTX *tls_ctx; /* tls.c: NULL when no certificate is configured */
 	/* A decoded frame, handed on by conn.c (cmd_dispatch). */
 	void (*on_frame)(cmd_server *d, cmd_conn *c, rp_frame *f, size_t used);
 	const char

@@ -50,6 +50,8 @@
 #include <sys/uio.h>
 #include <unistd.h>
 
+#include <openssl/ssl.h>
+
 #include "cmd.h"
 #include "log.h"
 
@@ -135,6 +137,10 @@ void cmd_conn_update_events(cmd_server *d, cmd_conn *c)
 typedef struct lingering {
 	el_watch w; /* ud: the cmd_server */
 	double until;
+	SSL *ssl;             /* TLS listener: the frame goes after the
+	                         handshake (NULL: sent, or plain) */
+	unsigned char *frame; /* ... and is this (malloc'ed) */
+	size_t len;
 	struct lingering *next, *prev;
 } lingering;
 
@@ -149,6 +155,8 @@ static void linger_free(cmd_server *d, lingering *g)
 	d->nlingers--;
 	el_watch_del(d->loop, &g->w);
 	close(g->w.fd);
+	SSL_free(g->ssl);
+	free(g->frame);
 	free(g);
 }
 
@@ -173,6 +181,22 @@ static void linger_ready(el_loop *l, el_watch *w, unsigned events)
 	lingering *g = (lingering *)((char *)w - offsetof(lingering, w));
 	(void)l;
 	(void)events;
+	if (g->ssl) { /* a TLS peer: the frame once the handshake is done */
+		char why[256];
+		int h = cmd_tls_handshake(g->ssl, why, sizeof(why));
+		if (h < 0 ||
+		    (h == 1 && cmd_tls_write(g->ssl, g->frame, g->len) !=
+		                       (ssize_t)g->len)) {
+			linger_free(d, g);
+			return;
+		}
+		if (h == 0)
+			return;
+		cmd_tls_close_notify(g->ssl);
+		shutdown(w->fd, SHUT_WR);
+		SSL_free(g->ssl);
+		g->ssl = NULL;
+	}
 	if (discard_input(w->fd))
 		linger_free(d, g);
 }
@@ -184,8 +208,8 @@ static void linger_ready(el_loop *l, el_watch *w, unsigned events)
  * turn the close into a reset.  With no room to linger (or no descriptor
  * to spare, may_linger 0) what has arrived is read before closing.
  */
-static void refuse(cmd_server *d, int fd, cmd_refusal why, int may_linger,
-                   const char *fmt, ...)
+static void refuse(cmd_server *d, int fd, int tls, cmd_refusal why,
+                   int may_linger, const char *fmt, ...)
 {
 	char msg[256];
 	va_list ap;
@@ -195,25 +219,40 @@ static void refuse(cmd_server *d, int fd, cmd_refusal why, int may_linger,
 	d->refused[why]++;
 	json_t *e =
 	        rp_reply_error(NULL, RP_ERR_TOO_MANY_CONNECTIONS, "%s", msg);
-	unsigned char *buf;
-	size_t len;
-	if (e && rp_frame_encode(e, NULL, 0, &buf, &len) == 0) {
-		if (send(fd, buf, len, MSG_NOSIGNAL | MSG_DONTWAIT) < 0)
-			srv_debug("refused connection: %s", strerror(errno));
-		free(buf);
-	}
+	unsigned char *buf = NULL;
+	size_t len = 0;
+	if (!e || rp_frame_encode(e, NULL, 0, &buf, &len) != 0)
+		buf = NULL;
 	json_decref(e);
-	shutdown(fd, SHUT_WR);
-	if (discard_input(fd)) {
-		close(fd);
-		return;
-	}
 	lingering *g = may_linger && d->nlingers < LINGER_MAX
 	                       ? calloc(1, sizeof(*g))
 	                       : NULL;
+	if (tls) { /* the frame can only go inside the session */
+		if (g && buf && (g->ssl = cmd_tls_new(d, fd)) != NULL) {
+			g->frame = buf;
+			g->len = len;
+			buf = NULL;
+		} else {
+			free(g);
+			g = NULL;
+		}
+	} else {
+		if (buf && send(fd, buf, len, MSG_NOSIGNAL | MSG_DONTWAIT) < 0)
+			srv_debug("refused connection: %s", strerror(errno));
+		shutdown(fd, SHUT_WR);
+		if (discard_input(fd)) {
+			free(g);
+			g = NULL;
+		}
+	}
+	free(buf);
 	if (!g || el_watch_add(d->loop, &g->w, fd, EL_READABLE, linger_ready,
 	                       d) != 0) {
-		free(g);
+		if (g) {
+			SSL_free(g->ssl);
+			free(g->frame);
+			free(g);
+		}
 		close(fd);
 		return;
 	}
@@ -329,20 +368,20 @@ int cmd_conn_init(cmd_server *d)
 /* Out of descriptors: give up the spare to accept one peer and refuse
  * it, so that it hears why instead of waiting in the backlog (and the
  * listener does not stay readable for ever).  0 when one was refused. */
-static int refuse_without_descriptors(cmd_server *d, int lfd)
+static int refuse_without_descriptors(cmd_server *d, int lfd, int tls)
 {
 	if (d->spare_fd < 0)
 		return -1;
 	close(d->spare_fd);
 	int fd = accept4(lfd, NULL, NULL, SOCK_NONBLOCK | SOCK_CLOEXEC);
 	if (fd >= 0)
-		refuse(d, fd, CMD_REFUSED_NO_DESCRIPTORS, 0,
+		refuse(d, fd, tls, CMD_REFUSED_NO_DESCRIPTORS, 0,
 		       "the daemon is out of file descriptors");
 	d->spare_fd = open("/dev/null", O_RDONLY | O_CLOEXEC);
 	return fd >= 0 ? 0 : -1;
 }
 
-void cmd_conn_accept(cmd_server *d, int lfd, int tcp, int needs_token)
+void cmd_conn_accept(cmd_server *d, int lfd, int tcp, int needs_token, int tls)
 {
 	srv *s = &d->core;
 	const srv_config *cfg = &s->cfg;
@@ -353,7 +392,7 @@ void cmd_conn_accept(cmd_server *d, int lfd, int tcp, int needs_token)
 		                 SOCK_NONBLOCK | SOCK_CLOEXEC);
 		if (fd < 0) {
 			if ((errno == EMFILE || errno == ENFILE) &&
-			    refuse_without_descriptors(d, lfd) == 0) {
+			    refuse_without_descriptors(d, lfd, tls) == 0) {
 				srv_warn("connection refused: out of file "
 				         "descriptors");
 				continue;
@@ -374,7 +413,7 @@ void cmd_conn_accept(cmd_server *d, int lfd, int tcp, int needs_token)
 			srv_warn("connection from %s refused: "
 			         "max_connections_per_address (%d) reached",
 			         peer, cfg->max_connections_per_address);
-			refuse(d, fd, CMD_REFUSED_PER_ADDRESS, 1,
+			refuse(d, fd, tls, CMD_REFUSED_PER_ADDRESS, 1,
 			       "this address already has %d connections open "
 			       "(max_connections_per_address)",
 			       cfg->max_connections_per_address);
@@ -389,7 +428,8 @@ void cmd_conn_accept(cmd_server *d, int lfd, int tcp, int needs_token)
 				srv_warn("connection from %s refused: "
 				         "max_connections (%d) reached",
 				         peer, cfg->max_connections);
-				refuse(d, fd, CMD_REFUSED_MAX_CONNECTIONS, 1,
+				refuse(d, fd, tls, CMD_REFUSED_MAX_CONNECTIONS,
+				       1,
 				       "the daemon serves at most %d "
 				       "connections",
 				       cfg->max_connections);
@@ -412,11 +452,18 @@ void cmd_conn_accept(cmd_server *d, int lfd, int tcp, int needs_token)
 		c->needs_token = needs_token;
 		c->reading = 1;
 		c->last_active = c->opened = now;
+		if (tls && !(c->ssl = cmd_tls_new(d, fd))) {
+			srv_warn("connection from %s: no TLS session", peer);
+			close(fd);
+			free(c);
+			continue;
+		}
 		memcpy(c->addr, key, (size_t)klen);
 		c->addr_len = klen;
 		snprintf(c->peer, sizeof(c->peer), "%s", peer);
 		if (el_watch_add(d->loop, &c->w, fd, EL_READABLE, conn_ready,
 		                 d) != 0) {
+			SSL_free(c->ssl);
 			close(fd);
 			free(c);
 			continue;
@@ -434,18 +481,33 @@ void cmd_conn_accept(cmd_server *d, int lfd, int tcp, int needs_token)
 
 /* ----------------------------------------------------------------- output */
 
+/* Write what the socket takes of the queue: a gather write, or one
+ * chunk through the TLS session. */
+static ssize_t conn_write(cmd_conn *c)
+{
+	if (c->ssl) {
+		cmd_chunk *k = c->out_head;
+		if (!c->tls_ready) {
+			errno = EAGAIN;
+			return -1;
+		}
+		return cmd_tls_write(c->ssl, k->buf + k->off, k->len - k->off);
+	}
+	struct iovec iov[32];
+	int n = 0;
+	for (cmd_chunk *k = c->out_head; k && n < 32; k = k->next) {
+		iov[n].iov_base = k->buf + k->off;
+		iov[n].iov_len = k->len - k->off;
+		n++;
+	}
+	struct msghdr mh = {.msg_iov = iov, .msg_iovlen = (size_t)n};
+	return sendmsg(c->fd, &mh, MSG_NOSIGNAL | MSG_DONTWAIT);
+}
+
 static void flush(cmd_server *d, cmd_conn *c)
 {
 	while (c->out_head && !c->dead) {
-		struct iovec iov[32];
-		int n = 0;
-		for (cmd_chunk *k = c->out_head; k && n < 32; k = k->next) {
-			iov[n].iov_base = k->buf + k->off;
-			iov[n].iov_len = k->len - k->off;
-			n++;
-		}
-		struct msghdr mh = {.msg_iov = iov, .msg_iovlen = (size_t)n};
-		ssize_t w = sendmsg(c->fd, &mh, MSG_NOSIGNAL | MSG_DONTWAIT);
+		ssize_t w = conn_write(c);
 		if (w < 0) {
 			if (errno == EAGAIN || errno == EINTR)
 				break;
@@ -477,6 +539,7 @@ static void flush(cmd_server *d, cmd_conn *c)
 		 * and discarding), so that unread input does not turn our
 		 * close into a reset that would lose the last frame. */
 		if (!c->wr_shut) {
+			cmd_tls_close_notify(c->ssl);
 			shutdown(c->fd, SHUT_WR);
 			c->wr_shut = 1;
 		}
@@ -775,6 +838,35 @@ static void conn_readable(cmd_server *d, cmd_conn *c)
 		cmd_conn_update_events(d, c);
 		return;
 	}
+	if (c->ssl && !c->tls_ready) {
+		/* A plain protocol client on a TLS listener: tell it so, in
+		 * its own words, instead of a failed handshake. */
+		char first = 0;
+		if (recv(c->fd, &first, 1, MSG_PEEK | MSG_DONTWAIT) == 1 &&
+		    first == '{') {
+			SSL_free(c->ssl);
+			c->ssl = NULL;
+			cmd_conn_send_error(d, c, NULL, RP_ERR_BAD_FRAME,
+			                    "this listener speaks TLS: connect "
+			                    "with tls://HOST:PORT");
+			return;
+		}
+		char why[256] = "";
+		int h = cmd_tls_handshake(c->ssl, why, sizeof(why));
+		if (h < 0) {
+			srv_info("connection %llu (%s): TLS handshake failed: "
+			         "%s",
+			         (unsigned long long)c->id, c->peer,
+			         why[0] ? why : strerror(errno));
+			c->dead = 1;
+			return;
+		}
+		if (h == 0)
+			return; /* the hello deadline bounds the handshake */
+		c->tls_ready = 1;
+		c->last_active = rad_seconds();
+		flush(d, c);
+	}
 	while (budget > 0) {
 		if (reserve(d, c) != 0) {
 			cmd_conn_send_error(
@@ -783,8 +875,10 @@ static void conn_readable(cmd_server *d, cmd_conn *c)
 			c->dead = 1;
 			return;
 		}
-		ssize_t n =
-		        read(c->fd, c->in + c->in_len, c->in_cap - c->in_len);
+		ssize_t n = c->ssl ? cmd_tls_read(c->ssl, c->in + c->in_len,
+		                                  c->in_cap - c->in_len)
+		                   : read(c->fd, c->in + c->in_len,
+		                          c->in_cap - c->in_len);
 		if (n < 0) {
 			if (errno == EINTR)
 				continue;
@@ -799,7 +893,8 @@ static void conn_readable(cmd_server *d, cmd_conn *c)
 		c->in_len += (size_t)n;
 		c->last_active = rad_seconds();
 		budget = (size_t)n >= budget ? 0 : budget - (size_t)n;
-		if (c->need && c->in_len - c->in_off < c->need)
+		if ((c->need && c->in_len - c->in_off < c->need) ||
+		    cmd_tls_pending(c->ssl))
 			continue;
 		break;
 	}
@@ -822,6 +917,7 @@ static void conn_readable(cmd_server *d, cmd_conn *c)
 static void conn_free(cmd_server *d, cmd_conn *c)
 {
 	el_watch_del(d->loop, &c->w);
+	SSL_free(c->ssl);
 	close(c->fd);
 	while (c->out_head) {
 		cmd_chunk *k = c->out_head;
@@ -885,6 +981,14 @@ void cmd_conn_tick(cmd_server *d, double now)
 			                    "nothing received or sent for %g s",
 			                    idle);
 	}
+}
+
+void cmd_conn_tls_pending(cmd_server *d)
+{
+	for (cmd_conn *c = d->conns; c; c = c->next)
+		if (!c->dead && c->reading && !c->closing &&
+		    cmd_tls_pending(c->ssl))
+			conn_readable(d, c);
 }
 
 void cmd_conn_free_all(cmd_server *d)

@@ -88,6 +88,7 @@ int cmd_load_token(cmd_server *d, const srv_config *cfg, char *msg,
 		free(d->token);
 	}
 	free(d->users);
+	cmd_tls_free(d);
 	d->token = t;
 	d->token_len = n - a;
 	memset(buf, 0, sizeof(buf));
@@ -148,7 +149,8 @@ static void listener_ready(el_loop *l, el_watch *w, unsigned events)
 		cmd_metrics_accept(d, lis->fd);
 	else
 		cmd_conn_accept(d, lis->fd, lis->kind == 0,
-		                cmd_token_needed(d, lis->needs_token));
+		                cmd_token_needed(d, lis->needs_token),
+		                lis->tls);
 }
 
 static int listen_tcp(cmd_server *d, const char *spec, int kind, char *msg,
@@ -190,11 +192,14 @@ static int listen_tcp(cmd_server *d, const char *spec, int kind, char *msg,
 	l->fd = fd;
 	l->kind = kind;
 	l->needs_token = !sockaddr_is_loopback(res->ai_addr);
+	const srv_tls_mode tm = d->core.cfg.tls;
+	l->tls = kind == 0 &&
+	         (tm == SRV_TLS_ALL || (tm == SRV_TLS_AUTO && l->needs_token));
 	freeaddrinfo(res);
 	char hp[300];
 	bound_text(fd, hp, sizeof(hp));
-	snprintf(l->text, sizeof(l->text), "%s %s",
-	         kind == 2 ? "metrics" : "tcp", hp);
+	snprintf(l->text, sizeof(l->text), "%s %s%s",
+	         kind == 2 ? "metrics" : "tcp", hp, l->tls ? " tls" : "");
 	d->nlis++;
 	return el_watch_add(d->loop, &l->w, fd, EL_READABLE, listener_ready, d);
 }
@@ -309,6 +314,21 @@ int cmd_server_listen(cmd_server *d, char *msg, size_t msglen)
 	if (c->listen_tcp[0] && listen_tcp(d, c->listen_tcp, 0, msg, msglen))
 		return -1;
 	for (int i = 0; i < d->nlis; i++) {
+		if (d->lis[i].tls && !d->tls_ctx) {
+			snprintf(msg, msglen,
+			         "%s speaks TLS (tls = %s) but no certificate "
+			         "is configured: set tls_cert_file and "
+			         "tls_key_file, or tls = off to send tokens in "
+			         "clear text",
+			         d->lis[i].text + 4,
+			         c->tls == SRV_TLS_ALL ? "all" : "auto");
+			return -2;
+		}
+		if (d->lis[i].kind == 0 && d->lis[i].needs_token &&
+		    !d->lis[i].tls)
+			srv_warn("%s is reachable beyond loopback without TLS "
+			         "(tls = off): tokens travel in clear text",
+			         d->lis[i].text + 4);
 		if (d->lis[i].needs_token && !d->token && !d->users_on) {
 			snprintf(msg, msglen,
 			         "refusing to listen on %s beyond loopback "
@@ -385,6 +405,15 @@ static void reload_config(cmd_server *d)
 		snprintf(nc.token_file, sizeof(nc.token_file), "%s",
 		         s->cfg.token_file);
 	}
+	if (cmd_tls_load(d, &nc, msg, sizeof(msg)) != 0) {
+		srv_error("SIGHUP: TLS certificate not reloaded (old one "
+		          "kept): %s",
+		          msg);
+		snprintf(nc.tls_cert_file, sizeof(nc.tls_cert_file), "%s",
+		         s->cfg.tls_cert_file);
+		snprintf(nc.tls_key_file, sizeof(nc.tls_key_file), "%s",
+		         s->cfg.tls_key_file);
+	}
 	if (cmd_users_load(d, &nc, msg, sizeof(msg)) != 0) {
 		srv_error("SIGHUP: users not reloaded (old ones kept): %s",
 		          msg);
@@ -452,7 +481,8 @@ int cmd_server_init(cmd_server *d, const srv_config *cfg, int argc, char **argv,
 	d->on_frame = cmd_dispatch;
 	srv_config_dump(cfg, config_line, NULL);
 	if (cmd_load_token(d, cfg, msg, msglen) != 0 ||
-	    cmd_users_load(d, cfg, msg, msglen) != 0)
+	    cmd_users_load(d, cfg, msg, msglen) != 0 ||
+	    cmd_tls_load(d, cfg, msg, msglen) != 0)
 		return -2;
 	if (cfg->require_token && !d->token && !d->users_on) {
 		snprintf(msg, msglen,
@@ -528,6 +558,7 @@ static void after_turn(el_loop *l, void *ud)
 	cmd_server *d = ud;
 	if (d->shutdown_asked)
 		cmd_server_shutdown(d, d->shutdown_asked);
+	cmd_conn_tls_pending(d);
 	cmd_conn_reap(d);
 	cmd_conn_tick(d, rad_seconds());
 	if (d->shutting_down) {
