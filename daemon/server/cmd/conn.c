@@ -37,6 +37,13 @@
  * given up for a moment, lets the daemon accept and refuse even when the
  * process is out of descriptors.  Every refusal and forced close is
  * counted by cause (cmd_refusal) for /metrics.
+ *
+ * TLS (tls.c).  On a TLS listener a connection's bytes go through its
+ * session: the handshake runs first, on readable events, within the
+ * hello deadline; conn_write and the reads call tls.c, which answers as
+ * write(2) and read(2) do; a refused peer gets its frame inside a session
+ * the linger makes.  Everything above (frames, limits, closing) is the
+ * same for both.
  */
 #include <errno.h>
 #include <fcntl.h>
