@@ -36,7 +36,7 @@ const rad_option_def rad_option_defs[RAD_NOPTIONS] = {
 	 lo,                                                                   \
 	 hi,                                                                   \
 	 range,                                                                \
-	 choices_##field[0] ? choices_##field : NULL,                          \
+	 RAD_OPT_##type == RAD_OPT_ENUM ? choices_##field : NULL,              \
 	 metavar,                                                              \
 	 unit,                                                                 \
 	 help},
