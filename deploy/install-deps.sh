@@ -26,8 +26,12 @@ set -euo pipefail
 # certificates and is its s_client.
 # python3-serial-asyncio is only a Recommends of python3-pymodbus, but
 # `import pymodbus.client` fails without it, so it is listed explicitly.
+# The fuzz stage builds with clang; libclang-rt-dev brings the runtime
+# libraries of its -fsanitize=fuzzer,address,undefined (libclang-rt-14-dev
+# on bookworm: libclang_rt.fuzzer and the sanitizers).
 PACKAGES=(
 	build-essential cmake ninja-build pkg-config clang-format
+	clang libclang-rt-dev
 	libembree-dev libtinygltf-dev libmodbus-dev libcmocka-dev
 	libjansson-dev libsqlite3-dev libpng-dev libjpeg62-turbo-dev libssl-dev
 	openssl

@@ -1,10 +1,15 @@
 #!/usr/bin/env bash
 # test.sh -- the whole test job: install dependencies, then build and run
-# the CTest suite three times.
+# the CTest suite four times.
 #
 #   1. release  build/       RelWithDebInfo, -Werror, every test
 #   2. asan     build-asan/  ASan + UBSan, every test
-#   3. tsan     build-tsan/  TSan, the tests that run solver threads
+#   3. fuzz     build-fuzz/  clang, libFuzzer + ASan + UBSan: the fuzz
+#                            harnesses alone (tests/fuzz/README.md), each
+#                            replaying its inputs, then fuzzing for
+#                            LUXRAD_FUZZ_SECONDS (60) from a copy of its
+#                            seed corpus
+#   4. tsan     build-tsan/  TSan, the tests that run solver threads
 #
 # A failing stage does not stop the later ones (one run shows every
 # problem), but the script exits non-zero if any stage failed.  CI reads
@@ -27,9 +32,13 @@ TIMEOUT=${LUXRAD_TEST_TIMEOUT:-900}
 # the other two stages).
 TSAN_TESTS='threads|direct|mem|cli|reference|store|config|daemon_session'
 TSAN_TESTS+='|daemon_badinput|daemon_admission|daemon_memory|daemon_query|mb_'
+# The fuzz harnesses on their seeds and regression inputs (a scene upload
+# builds its BVH on Embree's threads).
+TSAN_TESTS+='|fuzz_replay'
 JOBS=2
 
 declare -a VERDICT=()
+declare -a STAGE_TARGETS=()
 FAILED=0
 LAST_SUMMARY=""
 
@@ -48,12 +57,13 @@ record() {
 	fi
 }
 
-# configure_build DIR [cmake args...]: configure with Ninja and build all.
+# configure_build DIR [cmake args...]: configure with Ninja and build
+# STAGE_TARGETS (empty: all).
 configure_build() {
 	local dir=$1
 	shift
 	cmake -S "$ROOT" -B "$ROOT/$dir" -G Ninja -DLUXRAD_WERROR=ON "$@" &&
-		cmake --build "$ROOT/$dir" -j "$JOBS"
+		cmake --build "$ROOT/$dir" -j "$JOBS" "${STAGE_TARGETS[@]}"
 }
 
 # run_ctest DIR [ctest args...]: run CTest, remember its summary line.
@@ -68,7 +78,8 @@ run_ctest() {
 	return "$rc"
 }
 
-# stage NAME DIR CTEST_ARGS... -- cmake args come from STAGE_CMAKE.
+# stage NAME DIR CTEST_ARGS... -- cmake args come from STAGE_CMAKE, the
+# targets to build from STAGE_TARGETS.
 stage() {
 	local name=$1 dir=$2 rc
 	shift 2
@@ -103,6 +114,16 @@ export ASAN_OPTIONS=detect_leaks=1:halt_on_error=1:strict_string_checks=1
 export UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
 STAGE_CMAKE=(-DCMAKE_BUILD_TYPE=RelWithDebInfo -DLUXRAD_SANITIZE=address)
 stage asan build-asan
+
+# The fuzzers and their replays only (target "fuzzers"), with the
+# sanitizer settings above.  The fuzz_run_* tests run one at a time
+# (RUN_SERIAL) and write only below build-fuzz/.
+STAGE_CMAKE=(-DCMAKE_BUILD_TYPE=RelWithDebInfo -DLUXRAD_SANITIZE=
+	-DLUXRAD_FUZZ=ON -DCMAKE_C_COMPILER=clang -DCMAKE_CXX_COMPILER=clang++
+	-DLUXRAD_FUZZ_SECONDS="${LUXRAD_FUZZ_SECONDS:-60}")
+STAGE_TARGETS=(--target fuzzers)
+stage fuzz build-fuzz -L fuzz
+STAGE_TARGETS=()
 
 # Embree's BVH builder synchronises through TBB, and neither library (nor
 # libstdc++, which Embree calls) is built with TSan.  Two settings keep
