@@ -26,7 +26,7 @@ ROOT = os.path.normpath(os.path.join(HERE, "..", ".."))
 
 
 def dumps(obj):
-    return json.dumps(obj, separators=(",", ":"), sort_keys=False)
+    return json.dumps(obj, separators=(",", ":"), ensure_ascii=False)
 
 
 def write(path, data):
@@ -423,11 +423,13 @@ def gltf_seeds():
               d.node(name="sun", matrix=[1, 0, 0, 0, 0, 0, -1, 0, 0, 1, 0,
                                          0, 0, 5, 0, 1],
                      extensions={"KHR_lights_punctual": {"light": 2}})]
-    sensors = [d.node(name="sensor:desk", translation=[1, 0.8, 1]),
+    # Names beyond ASCII: notes and messages quote (and cut) them.
+    d.j["materials"][0]["name"] = "W\u00e4nde \u00d8 " * 12
+    sensors = [d.node(name="sensor:B\u00fcro", translation=[1, 0.8, 1]),
                d.node(name="wall probe", translation=[0.01, 1, 1],
                       rotation=[0, 0, -0.7071068, 0.7071068],
                       extras={"luxrad_sensor": "wall"})]
-    group = d.node(name="fixtures", children=lights + sensors,
+    group = d.node(name="Leuchten \u2014 " * 8, children=lights + sensors,
                    scale=[1, 1, 1], translation=[0, 0, 0])
     d.j["scenes"][0]["nodes"].append(group)
     out["lights_sensors.gltf"] = d.gltf()
