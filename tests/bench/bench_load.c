@@ -358,7 +358,7 @@ static void run_phase(const bench *b, phase *ph)
 	                       "--hello-timeout",
 	                       "5",
 	                       "--header-timeout",
-	                       "10",
+	                       "5",
 	                       "--log-level",
 	                       "error",
 	                       NULL};
