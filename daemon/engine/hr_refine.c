@@ -165,13 +165,12 @@ static rad_status refine_waves(rad_solver *sv, hr_state *st)
 /*
  * Without clusters every pair of polygons is a link to judge: O(n^2) form
  * factors, minutes for tens of thousands of polygons.  The rows are linked
- * in blocks of WAVE_INIT_BLOCK_PAIRS pairs, and the cancel flag (cancel, pause,
- * time budget, shutdown) is looked at after each: a cancelled first step
- * returns RAD_ERR_CANCELLED with the rows done kept (st->init_row), and
- * the next step goes on from the next row.  A block judges its pairs at
- * once (wave.c), so the flag is seen within one block's form factors.
+ * in blocks of WAVE_INIT_BLOCK_PAIRS pairs, and the cancel flag (cancel,
+ * pause, time budget, shutdown) is looked at after each: a cancelled first
+ * step returns RAD_ERR_CANCELLED with the rows done kept (st->init_row),
+ * and the next step goes on from the next row.  A block judges its pairs
+ * at once (wave.c), so the flag is seen within one block's form factors.
  */
-
 rad_status hr_initial_links(rad_solver *sv, hr_state *st)
 {
 	const rad_scene *s = sv->scene;
