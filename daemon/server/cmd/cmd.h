@@ -37,7 +37,7 @@
 
 typedef struct cmd_server cmd_server;
 typedef struct cmd_conn cmd_conn;
-typedef struct ssl_st SSL;          /* OpenSSL's, for tls.c */
+typedef struct ssl_st SSL; /* OpenSSL's, for tls.c */
 typedef struct ssl_ctx_st SSL_CTX;
 
 /* ------------------------------------------------------------ connections */
