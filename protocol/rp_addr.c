@@ -196,18 +196,19 @@ static int parse(const char *text, addr_use use, rp_addr *out, rp_error *err)
 			return -1;
 	} else {
 		const char *t = text;
-		if (strncmp(t, "tls://", 6) == 0 ||
-		    strncmp(t, "tls:", 4) == 0) {
+		size_t tls = strncmp(t, "tls://", 6) == 0 ? 6
+		             : strncmp(t, "tls:", 4) == 0 ? 4
+		                                          : 0;
+		if (tls) {
 			if (use == FOR_LISTEN) {
 				rp_fail(err, RP_ERR_BAD_REQUEST,
 				        "address '%.200s': a listener speaks "
-				        "TLS "
-				        "by the tls key, not a prefix",
+				        "TLS by the tls key, not a prefix",
 				        text);
 				return -1;
 			}
 			a.tls = 1;
-			t += t[4] == '/' ? 6 : 4;
+			t += tls;
 		} else if (strncmp(t, "tcp:", 4) == 0) {
 			t += 4;
 		}

@@ -326,6 +326,10 @@ static void test_address_tls(void **state)
 	expect_error_by(rp_addr_parse_listen, "tls://0.0.0.0:7420",
 	                "speaks TLS by the tls key");
 	expect_addr_error("tls://", "empty host");
+	/* "tls:/" is the short prefix and then "/": refused, and read
+	 * within the string (the fuzzer caught the parser skipping six). */
+	assert_int_equal(rp_addr_parse("tls:/", &a, &e), -1);
+	assert_int_equal(rp_addr_parse("tls:", &a, &e), -1);
 }
 
 /* Listeners: a port is required, 0 is "any free port", no Unix socket. */
