@@ -249,6 +249,8 @@ srv_job *cmd_req_job(cmd_req *r, int *failed);
 /* The request's "scene": NULL (r failed) when absent or not the
  * connection's to see. */
 srv_scene *cmd_req_scene(cmd_req *r);
+/* The same for a scene id the caller has parsed. */
+srv_scene *cmd_find_scene(cmd_req *r, uint64_t id);
 /* Map an engine status to a wire error code (every status has one). */
 rp_err cmd_err_from_rad(rad_status st);
 

@@ -90,10 +90,9 @@ cmd_result cmd_job_create(cmd_req *r)
 	if (name && strlen(name) > 255)
 		return cmd_req_fail(r, RP_ERR_BAD_REQUEST,
 		                    "\"name\" is longer than 255 bytes");
-	srv_scene *sc = srv_scene_find(s, scene_id);
-	if (!sc || !cmd_visible(r->c, sc->owner))
-		return cmd_req_fail(r, RP_ERR_NOT_FOUND, "no scene %llu",
-		                    (unsigned long long)scene_id);
+	srv_scene *sc = cmd_find_scene(r, scene_id);
+	if (!sc)
+		return CMD_ERROR;
 	if (srv_job_options_parse(s, json_object_get(r->hdr, "options"),
 	                          solver ? solver : "hr", &o, &r->err) != 0)
 		return CMD_ERROR;
@@ -273,9 +272,8 @@ cmd_result cmd_job_run(cmd_req *r)
 		return CMD_ERROR;
 	if (!lock_live(r, j, "", ": nothing to run"))
 		return CMD_ERROR;
-	if (!j->on_worker && srv_memory_full(r->s, NULL, 0)) {
+	if (!j->on_worker && cmd_req_memory_full(r)) {
 		pthread_mutex_unlock(&j->mu);
-		cmd_req_memory_full(r);
 		return CMD_ERROR;
 	}
 	srv_job_state st = j->state;
@@ -358,9 +356,8 @@ cmd_result cmd_job_resume(cmd_req *r)
 		                    (unsigned long long)j->id,
 		                    srv_job_state_name(st), why);
 	}
-	if (srv_memory_full(r->s, NULL, 0)) {
+	if (cmd_req_memory_full(r)) {
 		pthread_mutex_unlock(&j->mu);
-		cmd_req_memory_full(r);
 		return CMD_ERROR;
 	}
 	srv_job_enqueue_locked(r->s, j);

@@ -64,11 +64,9 @@ srv_job *cmd_req_job(cmd_req *r, int *failed)
 	return j;
 }
 
-srv_scene *cmd_req_scene(cmd_req *r)
+srv_scene *cmd_find_scene(cmd_req *r, uint64_t id)
 {
-	uint64_t id = 0;
-	if (rp_arg_u64(r->hdr, "scene", 1, &id, &r->err) != 0)
-		return NULL;
+	/* Another user's scene is as absent as one that never was. */
 	srv_scene *sc = srv_scene_find(r->s, id);
 	if (!sc || !cmd_visible(r->c, sc->owner)) {
 		cmd_req_fail(r, RP_ERR_NOT_FOUND, "no scene %llu",
@@ -76,6 +74,14 @@ srv_scene *cmd_req_scene(cmd_req *r)
 		return NULL;
 	}
 	return sc;
+}
+
+srv_scene *cmd_req_scene(cmd_req *r)
+{
+	uint64_t id = 0;
+	if (rp_arg_u64(r->hdr, "scene", 1, &id, &r->err) != 0)
+		return NULL;
+	return cmd_find_scene(r, id);
 }
 
 void cmd_reply_deferred(cmd_server *d, uint64_t conn_id, json_t *reply)
