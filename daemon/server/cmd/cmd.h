@@ -182,12 +182,11 @@ void cmd_conn_close_after_flush(cmd_server *d, cmd_conn *c);
 /* A deferred reply was delivered: process buffered frames. */
 void cmd_conn_unbusy(cmd_server *d, cmd_conn *c);
 void cmd_conn_free_all(cmd_server *d);
-/* Read what OpenSSL holds decrypted on connections that may read (the
- * socket no longer signals it); at the end of every loop turn. */
-void cmd_conn_tls_pending(cmd_server *d);
+
 /* Close dead connections (I/O thread, end of a loop turn). */
 void cmd_conn_reap(cmd_server *d);
-/* Idle connections, stuck flushes (end of every loop turn). */
+/* Deadlines (hello, header, idle), stuck flushes, and the bytes OpenSSL
+ * holds decrypted on TLS connections (end of every loop turn). */
 void cmd_conn_tick(cmd_server *d, double now);
 /* Reading paused/unpaused by busy / output pressure. */
 void cmd_conn_update_events(cmd_server *d, cmd_conn *c);

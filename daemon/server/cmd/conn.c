@@ -972,6 +972,12 @@ void cmd_conn_tick(cmd_server *d, double now)
 				c->dead = 1;
 			continue;
 		}
+		/* What OpenSSL holds decrypted: the socket no longer says. */
+		if (c->reading && cmd_tls_pending(c->ssl)) {
+			conn_readable(d, c);
+			if (c->dead || c->closing)
+				continue;
+		}
 		if (hello > 0 && !c->authed && now - c->opened > hello)
 			cmd_conn_send_error(d, c, NULL, RP_ERR_HELLO_TIMEOUT,
 			                    "no hello %g s after connecting",
@@ -988,14 +994,6 @@ void cmd_conn_tick(cmd_server *d, double now)
 			                    "nothing received or sent for %g s",
 			                    idle);
 	}
-}
-
-void cmd_conn_tls_pending(cmd_server *d)
-{
-	for (cmd_conn *c = d->conns; c; c = c->next)
-		if (!c->dead && c->reading && !c->closing &&
-		    cmd_tls_pending(c->ssl))
-			conn_readable(d, c);
 }
 
 void cmd_conn_free_all(cmd_server *d)

@@ -558,7 +558,6 @@ static void after_turn(el_loop *l, void *ud)
 	cmd_server *d = ud;
 	if (d->shutdown_asked)
 		cmd_server_shutdown(d, d->shutdown_asked);
-	cmd_conn_tls_pending(d);
 	cmd_conn_reap(d);
 	cmd_conn_tick(d, rad_seconds());
 	if (d->shutting_down) {
