@@ -191,25 +191,15 @@ int cmd_visible(const cmd_conn *c, const char *owner)
 
 /* ------------------------------------------------------ luxradd user-add */
 
+/* Base64url without padding (RFC 4648 §5), by OpenSSL's base64. */
 static void base64url(const unsigned char *in, size_t n, char *out)
 {
-	static const char a[] =
-	        "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuv"
-	        "wxyz0123456789-_";
-	size_t o = 0;
-	uint32_t acc = 0;
-	int bits = 0;
-	for (size_t i = 0; i < n; i++) {
-		acc = (acc << 8) | in[i];
-		bits += 8;
-		while (bits >= 6) {
-			out[o++] = a[(acc >> (bits - 6)) & 63];
-			bits -= 6;
-		}
-	}
-	if (bits > 0)
-		out[o++] = a[(acc << (6 - bits)) & 63];
-	out[o] = '\0';
+	int len = EVP_EncodeBlock((unsigned char *)out, in, (int)n);
+	while (len > 0 && out[len - 1] == '=')
+		len--;
+	out[len] = '\0';
+	for (char *p = out; *p; p++)
+		*p = *p == '+' ? '-' : *p == '/' ? '_' : *p;
 }
 
 int cmd_user_add(const char *path, const char *name, const char *role,
