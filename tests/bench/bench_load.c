@@ -31,12 +31,10 @@
  * connection closed, both jobs done with the same lux.  The exit status
  * is 1 when something was lost.
  */
-#include <arpa/inet.h>
 #include <errno.h>
 #include <fcntl.h>
 #include <jansson.h>
 #include <math.h>
-#include <netinet/in.h>
 #include <poll.h>
 #include <signal.h>
 #include <stdio.h>
@@ -121,20 +119,11 @@ static void usage(FILE *f)
 
 static int connect_from(const dm_daemon *d, const char *src)
 {
-	int fd = socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
-	if (fd < 0)
-		return -1;
-	struct sockaddr_in me = {.sin_family = AF_INET};
-	struct sockaddr_in sa = {.sin_family = AF_INET,
-	                         .sin_port = htons((uint16_t)d->tcp_port)};
-	inet_pton(AF_INET, src, &me.sin_addr);
-	inet_pton(AF_INET, d->tcp_host, &sa.sin_addr);
-	if (bind(fd, (struct sockaddr *)&me, sizeof(me)) != 0 ||
-	    connect(fd, (struct sockaddr *)&sa, sizeof(sa)) != 0) {
-		close(fd);
-		return -1;
-	}
-	fcntl(fd, F_SETFL, fcntl(fd, F_GETFL) | O_NONBLOCK);
+	char why[512];
+	int fd = dm_tcp_socket(d->tcp_host, d->tcp_port, 0, src, why,
+	                       sizeof(why));
+	if (fd >= 0)
+		fcntl(fd, F_SETFL, fcntl(fd, F_GETFL) | O_NONBLOCK);
 	return fd;
 }
 

@@ -128,6 +128,11 @@ dm_conn *dm_connect_tcp_rcvbuf(const dm_daemon *d, int rcvbuf);
 /* From a source address of our own (127.0.0.2, ...: another peer as far
  * as per-address limits go). */
 dm_conn *dm_connect_tcp_from(const dm_daemon *d, const char *src);
+/* A blocking TCP socket connected to host:port, from src when not NULL,
+ * with SO_RCVBUF rcvbuf when > 0: the fd, or -1 with why filled (for
+ * callers that drive sockets themselves, as the load benchmark). */
+int dm_tcp_socket(const char *host, int port, int rcvbuf, const char *src,
+                  char *why, size_t len);
 /* A session (hello done) once the daemon has a slot for it, retrying
  * while it refuses; NULL after timeout_ms.  src as dm_connect_tcp_from
  * (NULL: the default source). */

@@ -40,26 +40,40 @@ static dm_conn *conn_new(int fd, const char *what)
 	return c;
 }
 
+int dm_tcp_socket(const char *host, int port, int rcvbuf, const char *src,
+                  char *why, size_t len)
+{
+	int fd = socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+	if (fd < 0) {
+		snprintf(why, len, "socket: %s", strerror(errno));
+		return -1;
+	}
+	if (rcvbuf > 0)
+		setsockopt(fd, SOL_SOCKET, SO_RCVBUF, &rcvbuf, sizeof(rcvbuf));
+	struct sockaddr_in me = {.sin_family = AF_INET};
+	struct sockaddr_in sa = {.sin_family = AF_INET,
+	                         .sin_port = htons((uint16_t)port)};
+	if (src && (inet_pton(AF_INET, src, &me.sin_addr) != 1 ||
+	            bind(fd, (struct sockaddr *)&me, sizeof(me)) != 0))
+		snprintf(why, len, "bind to %s: %s", src, strerror(errno));
+	else if (inet_pton(AF_INET, host, &sa.sin_addr) != 1)
+		snprintf(why, len, "bad daemon address %s", host);
+	else if (connect(fd, (struct sockaddr *)&sa, sizeof(sa)) != 0)
+		snprintf(why, len, "connect %s:%d: %s", host, port,
+		         strerror(errno));
+	else
+		return fd;
+	close(fd);
+	return -1;
+}
+
 static dm_conn *connect_tcp(const char *host, int port, int rcvbuf,
                             const char *src)
 {
-	int fd = socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+	char why[512];
+	int fd = dm_tcp_socket(host, port, rcvbuf, src, why, sizeof(why));
 	if (fd < 0)
-		dm_fail("socket: %s", strerror(errno));
-	if (rcvbuf > 0)
-		setsockopt(fd, SOL_SOCKET, SO_RCVBUF, &rcvbuf, sizeof(rcvbuf));
-	if (src) {
-		struct sockaddr_in me = {.sin_family = AF_INET};
-		if (inet_pton(AF_INET, src, &me.sin_addr) != 1 ||
-		    bind(fd, (struct sockaddr *)&me, sizeof(me)) != 0)
-			dm_fail("bind to %s: %s", src, strerror(errno));
-	}
-	struct sockaddr_in sa = {.sin_family = AF_INET,
-	                         .sin_port = htons((uint16_t)port)};
-	if (inet_pton(AF_INET, host, &sa.sin_addr) != 1)
-		dm_fail("bad daemon address %s", host);
-	if (connect(fd, (struct sockaddr *)&sa, sizeof(sa)) != 0)
-		dm_fail("connect %s:%d: %s", host, port, strerror(errno));
+		dm_fail("%s", why);
 	int one = 1;
 	setsockopt(fd, IPPROTO_TCP, TCP_NODELAY, &one, sizeof(one));
 	return conn_new(fd, "tcp");
