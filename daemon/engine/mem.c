@@ -71,21 +71,51 @@ uint64_t rad_mem_limit_refusals(void)
 	return atomic_load(&limit_refusals);
 }
 
+/* Shared with other processes (rad_mem_share): set while no other
+ * thread allocates, read by every count. */
+static rad_mem_shared *shared_g;
+static int64_t *shared_own;
+
+void rad_mem_share(rad_mem_shared *g, int64_t *own)
+{
+	int64_t now = atomic_load(&process_bytes);
+	if (shared_g) {
+		__atomic_fetch_sub(&shared_g->bytes, now, __ATOMIC_RELAXED);
+		__atomic_fetch_sub(shared_own, now, __ATOMIC_RELAXED);
+	}
+	shared_g = g && own ? g : NULL;
+	shared_own = g && own ? own : NULL;
+	if (shared_g) {
+		__atomic_fetch_add(&shared_g->bytes, now, __ATOMIC_RELAXED);
+		__atomic_fetch_add(shared_own, now, __ATOMIC_RELAXED);
+	}
+}
+
+int64_t rad_mem_limit_held(void)
+{
+	if (shared_g)
+		return __atomic_load_n(&shared_g->bytes, __ATOMIC_RELAXED);
+	return atomic_load_explicit(&process_bytes, memory_order_relaxed);
+}
+
 int rad_mem_over_limit(size_t size)
 {
 	int64_t lim = atomic_load_explicit(&limit_bytes, memory_order_relaxed);
-	if (lim <= 0 ||
-	    atomic_load_explicit(&process_bytes, memory_order_relaxed) +
-	                    (int64_t)size <=
-	            lim)
+	if (lim <= 0 || rad_mem_limit_held() + (int64_t)size <= lim)
 		return 0;
 	atomic_fetch_add(&limit_refusals, 1);
+	if (shared_g)
+		__atomic_fetch_add(&shared_g->refusals, 1, __ATOMIC_RELAXED);
 	return 1;
 }
 
 void rad_mem_count(rad_mem *m, rad_mem_kind kind, int64_t delta)
 {
 	atomic_fetch_add_explicit(&process_bytes, delta, memory_order_relaxed);
+	if (shared_g) {
+		__atomic_fetch_add(&shared_g->bytes, delta, __ATOMIC_RELAXED);
+		__atomic_fetch_add(shared_own, delta, __ATOMIC_RELAXED);
+	}
 	atomic_fetch_add(&m->bytes[kind], delta);
 	int64_t t = atomic_fetch_add(&m->total, delta) + delta;
 	int64_t p = atomic_load(&m->peak);

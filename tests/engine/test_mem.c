@@ -9,6 +9,9 @@
 #include <stddef.h>
 #include <stdint.h>
 #include <string.h>
+#include <sys/mman.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <cmocka.h>
 
@@ -418,9 +421,82 @@ static void test_limit_refuses_cleanly(void **state)
 	assert_int_equal(rad_mem_process_bytes(), base);
 }
 
+/*
+ * One limit over two processes: a child process shares a counter page
+ * with its parent, builds a scene and dies without freeing it (as a
+ * crashed solver process would).  Its bytes are seen in the page while
+ * it lives, its share says how many to take back, and the parent's own
+ * allocations are refused by what the child holds.
+ */
+static void test_limit_shared_between_processes(void **state)
+{
+	(void)state;
+	struct page {
+		rad_mem_shared g;
+		int64_t own[2];
+		int64_t child_held, child_peak;
+	} *pg = mmap(NULL, sizeof(*pg), PROT_READ | PROT_WRITE,
+	             MAP_SHARED | MAP_ANONYMOUS, -1, 0);
+	assert_true(pg != MAP_FAILED);
+	memset(pg, 0, sizeof(*pg));
+	int64_t base = rad_mem_process_bytes();
+	rad_mem_share(&pg->g, &pg->own[0]);
+	assert_int_equal(pg->g.bytes, base);
+	assert_int_equal(pg->own[0], base);
+
+	pid_t pid = fork();
+	assert_true(pid >= 0);
+	if (pid == 0) {
+		rad_mem_share(NULL, NULL); /* the parent's bytes are its own */
+		rad_mem_share(&pg->g, &pg->own[1]);
+		rad_scene *s = NULL;
+		rad_error err;
+		if (build_grid_room(24, &s, &err) != RAD_OK)
+			_exit(1);
+		rad_mem_report r;
+		rad_scene_memory(s, &r);
+		pg->child_held = rad_mem_process_bytes();
+		pg->child_peak = r.peak_total;
+		_exit(0); /* the scene is never freed */
+	}
+	int status = 0;
+	assert_int_equal(waitpid(pid, &status, 0), pid);
+	assert_true(WIFEXITED(status) && WEXITSTATUS(status) == 0);
+	/* The child's bytes: counted in the page, by its own share. */
+	assert_true(pg->own[1] > 0);
+	assert_int_equal(pg->own[1], pg->child_held - base);
+	assert_int_equal(pg->g.bytes, base + pg->own[1]);
+	assert_int_equal(rad_mem_limit_held(), pg->g.bytes);
+
+	/* A limit the same build passes alone refuses it now. */
+	int64_t lim = base + pg->child_peak + pg->own[1] / 2;
+	rad_mem_set_limit(lim);
+	uint64_t refused0 = pg->g.refusals;
+	rad_scene *s = NULL;
+	rad_error err;
+	assert_int_equal(build_grid_room(24, &s, &err), RAD_ERR_NOMEM);
+	rad_mem_set_limit(0);
+	assert_true(pg->g.refusals > refused0);
+	assert_int_equal(rad_mem_process_bytes(), base);
+
+	/* The dead child's bytes are taken back: the limit lets it be. */
+	__atomic_fetch_sub(&pg->g.bytes, pg->own[1], __ATOMIC_RELAXED);
+	rad_mem_set_limit(lim);
+	assert_int_equal(build_grid_room(24, &s, &err), RAD_OK);
+	rad_mem_set_limit(0);
+	assert_int_equal(pg->g.bytes, rad_mem_process_bytes());
+	rad_scene_free(s);
+	rad_mem_share(NULL, NULL);
+	assert_int_equal(pg->g.bytes, 0);
+	assert_int_equal(rad_mem_limit_held(), base);
+	munmap(pg, sizeof(*pg));
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
+	        /* First: it forks, before any thread (Embree's) exists. */
+	        cmocka_unit_test(test_limit_shared_between_processes),
 	        cmocka_unit_test(test_counts_match_allocator),
 	        cmocka_unit_test(test_pool_records_stay_put),
 	        cmocka_unit_test(test_injected_failure_counts_nothing),

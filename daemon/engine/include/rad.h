@@ -113,7 +113,8 @@ const char *rad_mem_kind_name(rad_mem_kind kind);
 /*
  * A process-wide memory limit over every counted allocation (scenes,
  * solvers, solutions, Embree's BVH): with a limit set, an allocation that
- * would take the bytes counted in the process past it fails as if the
+ * would take the bytes counted in the process (or, after rad_mem_share,
+ * in every process sharing the count) past it fails as if the
  * allocator had no memory, and the caller gets RAD_ERR_NOMEM (Embree's
  * allocations are refused through its memory monitor).  Threads check and
  * count separately, so the total may pass the limit by at most one
@@ -126,6 +127,27 @@ int64_t rad_mem_limit(void);
 int64_t rad_mem_process_bytes(void);
 /* Allocations the limit has refused since the process started. */
 uint64_t rad_mem_limit_refusals(void);
+
+/*
+ * One limit over several processes (the daemon and its solver
+ * processes).  After rad_mem_share(g, own), every count of this process
+ * is also added to g->bytes and to *own, the limit is judged against
+ * g->bytes, and each refusal is also counted in g->refusals.  g and own
+ * are meant to live in memory the processes map together (MAP_SHARED);
+ * they are only touched with atomic operations.  *own is this process's
+ * share, so that the process that made the mapping can take a dead
+ * process's bytes back out of g->bytes.  The bytes already counted are
+ * added on the call; rad_mem_share(NULL, NULL) takes them out again and
+ * stops sharing.  Call it while no other thread allocates.
+ */
+typedef struct rad_mem_shared {
+	int64_t bytes;     /* counted by every sharing process */
+	uint64_t refusals; /* refused by the limit in any of them */
+} rad_mem_shared;
+void rad_mem_share(rad_mem_shared *g, int64_t *own);
+/* What the limit is judged against: g->bytes while shared, else
+ * rad_mem_process_bytes(). */
+int64_t rad_mem_limit_held(void);
 
 /* ------------------------------------------------------------------ scene */
 
