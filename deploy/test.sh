@@ -32,6 +32,7 @@ TIMEOUT=${LUXRAD_TEST_TIMEOUT:-900}
 # the other two stages).
 TSAN_TESTS='threads|direct|mem|cli|reference|store|config|daemon_session'
 TSAN_TESTS+='|daemon_badinput|daemon_admission|daemon_memory|daemon_query|mb_'
+TSAN_TESTS+='|daemon_isolation'
 # The fuzz harnesses on their seeds and regression inputs (a scene upload
 # builds its BVH on Embree's threads).
 TSAN_TESTS+='|fuzz_replay'

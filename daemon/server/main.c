@@ -71,6 +71,8 @@ int main(int argc, char **argv)
 
 	if (argc > 1 && strcmp(argv[1], "user-add") == 0)
 		return user_add(argc, argv);
+	if (argc > 1 && strcmp(argv[1], "solve-worker") == 0)
+		return srv_worker_main(argc, argv);
 	srv_config_default(&cfg);
 	rc = srv_config_from_args(&cfg, argc, argv, msg, sizeof(msg));
 	if (rc == 1)

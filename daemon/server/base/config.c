@@ -95,6 +95,15 @@ static const cfg_key keys[] = {
          "jobs solved at the same time (1..256)"},
         {"solver_threads", K_INT, F(solver_threads), 0, 1024, "N", "2",
          "engine threads per job (0..1024); 0 = cores / workers, at least 1"},
+        {"isolation", K_ISOLATION, F(isolation), 0, 0, "MODE", "process",
+         "where a job's solver runs: process = a process of its own, so a "
+         "fault in it fails that job alone; thread = the daemon's threads "
+         "(no process start, but one fault stops every job)"},
+        {"solver_stop_timeout", K_SECONDS, F(solver_stop_timeout_s), 0, 3600,
+         "DURATION", "10s",
+         "a solver process that has not stopped this long after it was asked "
+         "to (pause, cancel, time budget, shutdown) is killed; its job keeps "
+         "its last iteration; 0 = never"},
         {"query_threads", K_INT, F(query_threads), 1, 256, "N", "4",
          "threads answering queries and exports (1..256)"},
         {"accuracy", K_REAL, F(accuracy), RAD_ACCURACY_MIN, RAD_ACCURACY_MAX,
@@ -163,6 +172,7 @@ const cfg_key *cfg_keys(size_t *n)
 
 static const char *const level_names[] = {"error", "warn", "info", "debug"};
 static const char *const tls_names[] = {"auto", "all", "off"};
+static const char *const isolation_names[] = {"process", "thread"};
 
 /* ------------------------------------------------------------- defaults */
 
@@ -243,6 +253,8 @@ void srv_config_default(srv_config *c)
 	c->workers = 2;
 	c->solver_threads = 0;
 	c->query_threads = 2;
+	c->isolation = SRV_ISOLATION_PROCESS;
+	c->solver_stop_timeout_s = 10;
 	c->accuracy = RAD_ACCURACY_DEFAULT;
 	c->log_level = SRV_LOG_INFO;
 	c->max_header_bytes = 4 * MiB;
@@ -452,6 +464,14 @@ int cfg_set_value(srv_config *c, const cfg_key *k, const char *v, char *msg,
 				return *(srv_tls_mode *)p = (srv_tls_mode)i, 0;
 		return srv_fail(msg, msglen,
 		                "'%s' is not a TLS mode (auto, all, off)", v);
+	case K_ISOLATION:
+		for (int i = 0; i < 2; i++)
+			if (strcasecmp(v, isolation_names[i]) == 0)
+				return *(srv_isolation *)p = (srv_isolation)i,
+				                       0;
+		return srv_fail(msg, msglen,
+		                "'%s' is not an isolation (process, thread)",
+		                v);
 	case K_MODBUS:
 		return mb_config_set(&c->modbus, k->name, v, msg, msglen);
 	default:
@@ -549,6 +569,10 @@ void cfg_fmt_value(const srv_config *c, const cfg_key *k, char *buf, size_t len)
 		break;
 	case K_TLS:
 		snprintf(buf, len, "%s", tls_names[*(const srv_tls_mode *)p]);
+		break;
+	case K_ISOLATION:
+		snprintf(buf, len, "%s",
+		         isolation_names[*(const srv_isolation *)p]);
 		break;
 	case K_SIZE: {
 		uint64_t n = *(const size_t *)p;

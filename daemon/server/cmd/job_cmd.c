@@ -180,6 +180,9 @@ cmd_result cmd_job_info(cmd_req *r)
 	                    json_integer(j->ckpt_iter));
 	json_object_set_new(o, "memory_bytes",
 	                    json_integer(srv_job_memory_locked(j)));
+	int pid = srv_job_solver_pid_locked(j);
+	if (pid > 0)
+		json_object_set_new(o, "solver_pid", json_integer(pid));
 	if (j->has_pending_eps)
 		json_object_set_new(o, "pending_eps",
 		                    json_real(j->pending_eps));

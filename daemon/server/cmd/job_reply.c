@@ -100,14 +100,14 @@ typedef struct persist_task {
 	srv_task t;
 	srv_job *job; /* ref */
 	json_t *reply;
-	rad_solver *drop; /* a cancelled job's solver, freed here */
+	srv_runner *drop; /* a cancelled job's solver, freed here */
 } persist_task;
 
 static void persist_run(srv *s, srv_task *t)
 {
 	persist_task *p = (persist_task *)t;
 	char msg[512];
-	rad_solver_free(p->drop);
+	srv_runner_free(p->drop);
 	p->drop = NULL;
 	if (srv_job_persist(s, p->job, NULL, -1, msg, sizeof(msg)) != 0) {
 		srv_error("job %llu: cannot record the change: %s",

@@ -122,12 +122,18 @@ static void metrics_body(cmd_server *d, sbuf *sb)
 	      "The engine's memory limit (memory_limit, resolved).");
 	sb_printf(sb, "luxradd_memory_limit_bytes %lld\n",
 	          (long long)s->mem_limit);
-	sb_printf(sb,
-	          "# HELP luxradd_memory_limit_refusals_total Engine "
-	          "allocations refused by the memory limit.\n"
-	          "# TYPE luxradd_memory_limit_refusals_total counter\n"
-	          "luxradd_memory_limit_refusals_total %llu\n",
-	          (unsigned long long)rad_mem_limit_refusals());
+	sb_printf(
+	        sb,
+	        "# HELP luxradd_memory_limit_refusals_total Engine "
+	        "allocations refused by the memory limit (solver "
+	        "processes included).\n"
+	        "# TYPE luxradd_memory_limit_refusals_total counter\n"
+	        "luxradd_memory_limit_refusals_total %llu\n",
+	        (unsigned long long)(s->mem_share
+	                                     ? __atomic_load_n(
+	                                               &s->mem_share->refusals,
+	                                               __ATOMIC_RELAXED)
+	                                     : rad_mem_limit_refusals()));
 	sb_printf(sb,
 	          "# HELP luxradd_events_dropped_total Progress events "
 	          "dropped for slow subscribers.\n"

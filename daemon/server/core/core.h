@@ -16,6 +16,8 @@
  *   runq.c     the run queue of jobs waiting for a worker
  *   scenes.c   the scene registry and loading a scene
  *   job.c      job state machine and the solver worker threads
+ *   runner.c   where a job's solver runs: a thread or a solver process
+ *   worker.c   the solver process (luxradd solve-worker)
  *   jobjson.c  job options and targets as JSON (job.info, rows)
  *   persist.c  job rows and checkpoints in the store
  *   recover.c  startup from the store
@@ -51,6 +53,7 @@ typedef struct srv_job srv_job;
 typedef struct srv_scene srv_scene;
 typedef struct srv_sol srv_sol;
 typedef struct srv_task srv_task;
+typedef struct srv_runner srv_runner; /* runner.h */
 
 /* ------------------------------------------------------------------ scenes */
 
@@ -199,12 +202,13 @@ struct srv_job {
 	double deadline; /* SECONDS mode: rad_seconds() to stop at, 0 */
 	srv_sol *sol;    /* latest published solution (ref), or NULL */
 	int deleted;     /* removed from the registry */
-	/* The engine's cancel flag: raised (atomically) under mu by the
-	 * I/O thread or the stepping thread, lowered by the worker. */
-	volatile int cancel;
+	/* The job's solver (runner.h), set and cleared under mu by the
+	 * worker: the I/O thread reads its memory, raises its cancel flag
+	 * and reaps a process that died while the job waited; only the
+	 * worker holding the job steps it. */
+	srv_runner *runner;
 
 	/* worker-owned */
-	rad_solver *solver;
 	uint32_t solver_iter; /* iterations the solver has done */
 	size_t eps_applied;   /* eps_log entries applied to the solver */
 	double step_t0;       /* rad_seconds() at the current step's start */
@@ -243,6 +247,8 @@ int srv_job_options_parse(srv *s, json_t *opts, const char *solver,
 json_t *srv_job_options_json(const srv_job *j); /* effective options */
 /* Solver memory of a job plus its solution (caller holds j->mu). */
 int64_t srv_job_memory_locked(const srv_job *j);
+/* The pid of the job's live solver process, else 0 (caller holds mu). */
+int srv_job_solver_pid_locked(const srv_job *j);
 
 /* Worker pool (job.c). */
 int srv_workers_start(srv *s, int n, char *msg, size_t msglen);
@@ -374,8 +380,12 @@ int srv_job_store_add(srv *s, srv_job *j, char *msg, size_t msglen);
 /* Remove a job's row and checkpoint (store thread); 0 or -1 with msg. */
 int srv_job_store_remove(srv *s, srv_job *j, char *msg, size_t msglen);
 /* A finished job's solver, taken away (NULL when the job is live or has
- * none): the caller frees it, off the I/O thread. */
-rad_solver *srv_job_detach_solver(srv_job *j);
+ * none): the caller frees it (srv_runner_free), off the I/O thread. */
+srv_runner *srv_job_detach_solver(srv_job *j);
+void srv_runner_free(srv_runner *r);
+/* `luxradd solve-worker PARENT-PID`, the solver process a job runs in
+ * (worker.c; started by the daemon itself, runner.c). */
+int srv_worker_main(int argc, char **argv);
 
 /*
  * rad_solution_illuminance for one query, spread over the query threads
@@ -435,6 +445,13 @@ struct srv {
 	atomic_int stopping;    /* workers: checkpoint and stop */
 	atomic_llong sol_bytes; /* live published solutions */
 	int64_t mem_limit;      /* the engine's limit in force (memory.c) */
+	/* The memory count the daemon and its solver processes share
+	 * (runner.c), and the page's descriptor they inherit. */
+	rad_mem_shared *mem_share;
+	int mem_share_fd;
+	atomic_int isolation;          /* srv_isolation, for new solvers */
+	atomic_llong solver_stop_ms;   /* solver_stop_timeout */
+	char worker_exe[64];           /* the solver process's program */
 	atomic_llong ckpt_interval_ms; /* checkpoint_interval_s */
 
 	struct {

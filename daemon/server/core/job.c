@@ -6,7 +6,8 @@
  *
  * DESIGN
  * A worker takes a job from the run queue and holds it (on_worker) until
- * it stops; only that worker touches the job's rad_solver.  Between
+ * it stops; only that worker steps the job's solver (runner.h: in a
+ * solver process of the job's own, or on this thread).  Between
  * iterations it decides under the job's mutex what to do next
  * (next_action): cancel, pause, stop for a shutdown, finish (converged or
  * max_iterations), pause because the target is reached, or step; the
@@ -38,6 +39,7 @@
 #include "core.h"
 #include "engine_json.h"
 #include "log.h"
+#include "runner.h"
 
 #define PROGRESS_MIN_S 0.1 /* progress events: at most ~10/s per job */
 #define BUDGET_TICK_S 0.1  /* time budgets checked by the I/O thread */
@@ -74,7 +76,7 @@ void srv_job_unref(srv *s, srv_job *j)
 {
 	if (!j || atomic_fetch_sub(&j->refs, 1) != 1)
 		return;
-	rad_solver_free(j->solver);
+	srv_runner_free(j->runner);
 	srv_sol_unref(s, j->sol);
 	free(j->stats_json);
 	free(j->eps_log);
@@ -107,13 +109,13 @@ void srv_job_unregister(srv *s, srv_job *j)
 	srv_job_gone(s, j);
 }
 
-rad_solver *srv_job_detach_solver(srv_job *j)
+srv_runner *srv_job_detach_solver(srv_job *j)
 {
-	rad_solver *drop = NULL;
+	srv_runner *drop = NULL;
 	pthread_mutex_lock(&j->mu);
 	if (srv_job_terminal(j->state) && !j->on_worker) {
-		drop = j->solver;
-		j->solver = NULL;
+		drop = j->runner;
+		j->runner = NULL;
 		memset(j->solver_mem, 0, sizeof(j->solver_mem));
 	}
 	pthread_mutex_unlock(&j->mu);
@@ -129,13 +131,29 @@ int64_t srv_job_memory_locked(const srv_job *j)
 	return b + (j->sol ? j->sol->bytes : 0);
 }
 
+int srv_job_solver_pid_locked(const srv_job *j)
+{
+	SRV_HELD(&j->mu);
+	return j->runner ? (int)srv_runner_pid(j->runner) : 0;
+}
+
 void srv_job_raise_cancel_locked(srv_job *j)
 {
 	SRV_HELD(&j->mu);
 	/* Not while replaying: an interrupted replay step would differ
-	 * from the original one.  Requests are checked between steps. */
-	if (!j->replaying)
-		__atomic_store_n(&j->cancel, 1, __ATOMIC_RELAXED);
+	 * from the original one.  Requests are checked between steps.  No
+	 * runner yet: attach_runner raises it if a request is pending. */
+	if (!j->replaying && j->runner)
+		srv_runner_raise(j->runner);
+}
+
+/* A request is pending that the cancel flag stands for (caller holds
+ * mu). */
+static int stop_wanted_locked(srv *s, srv_job *j)
+{
+	SRV_HELD(&j->mu);
+	return j->cancel_req || j->pause_req || atomic_load(&s->stopping) ||
+	       (j->deadline > 0 && rad_seconds() >= j->deadline);
 }
 
 /* ------------------------------------------------------------- solutions */
@@ -204,11 +222,11 @@ static void publish(srv *s, srv_job *j, int send_event)
 	rad_solution *rs = NULL;
 	srv_sol *ns = NULL;
 
-	rad_solver_stats(j->solver, &st);
+	srv_runner_stats(j->runner, &st);
 	json_t *stats = ej_stats(&st);
 	char *text = json_dumps(stats, JSON_COMPACT | JSON_REAL_PRECISION(17));
 	json_decref(stats);
-	if (rad_solution_new(j->solver, &rs, &err) == RAD_OK)
+	if (srv_runner_solution(j->runner, &rs, &err) == RAD_OK)
 		ns = srv_sol_new(s, rs, j->scene, j->opt.query_tol,
 		                 st.error_estimate);
 	else
@@ -227,10 +245,7 @@ static void publish(srv *s, srv_job *j, int send_event)
 	j->residual = st.residual;
 	j->links = st.links;
 	j->converged = st.converged;
-	for (int k = 0; k < RAD_MEM_NKINDS; k++) {
-		int64_t b = st.mem.bytes[k] - j->scene->mem.bytes[k];
-		j->solver_mem[k] = b > 0 ? b : 0;
-	}
+	srv_runner_memory(j->runner, j->solver_mem);
 	j->updated = srv_now_unix();
 	pthread_mutex_unlock(&j->mu);
 	srv_sol_unref(s, old);
@@ -259,18 +274,18 @@ static void post_state(srv *s, srv_job *j)
 static int apply_eps_locked(srv_job *j, rad_error *err)
 {
 	SRV_HELD(&j->mu);
-	if (!j->solver)
+	if (!j->runner)
 		return 0; /* applied once the solver exists */
 	while (j->eps_applied < j->neps &&
 	       j->eps_log[j->eps_applied].iteration <= j->solver_iter) {
-		if (rad_solver_set_eps(j->solver,
+		if (srv_runner_set_eps(j->runner,
 		                       j->eps_log[j->eps_applied].eps,
 		                       err) != RAD_OK)
 			return -1;
 		j->eps_applied++;
 	}
 	if (j->has_pending_eps && !j->replaying) {
-		if (rad_solver_set_eps(j->solver, j->pending_eps, err) !=
+		if (srv_runner_set_eps(j->runner, j->pending_eps, err) !=
 		    RAD_OK)
 			return -1;
 		/* A later decision overrides what a lost run had planned. */
@@ -300,7 +315,8 @@ static job_action next_action(srv *s, srv_job *j, rad_error *err)
 {
 	job_action a = ACT_STEP;
 	pthread_mutex_lock(&j->mu);
-	__atomic_store_n(&j->cancel, 0, __ATOMIC_RELAXED);
+	if (j->runner)
+		srv_runner_lower(j->runner);
 	if (j->cancel_req)
 		a = ACT_CANCEL;
 	else if (j->pause_req)
@@ -327,20 +343,36 @@ static job_action next_action(srv *s, srv_job *j, rad_error *err)
 	return a;
 }
 
-static int build_solver(srv_job *j, rad_error *err)
+/* Drop the job's runner (its process died or was killed): the next run
+ * builds a new one and replays it to the published iteration. */
+static void drop_runner(srv_job *j)
 {
-	rad_options o = j->opt;
-	o.progress = on_progress;
-	o.progress_ud = j;
-	o.cancel = &j->cancel;
-	rad_solver *sv = NULL;
-	if (rad_solver_new(j->scene->scene, &o, &sv, err) != RAD_OK)
-		return -1;
-	pthread_mutex_lock(&j->mu); /* the I/O thread reads its memory */
-	j->solver = sv;
+	pthread_mutex_lock(&j->mu);
+	srv_runner *r = j->runner;
+	j->runner = NULL;
 	pthread_mutex_unlock(&j->mu);
+	srv_runner_free(r);
 	j->solver_iter = 0;
 	j->eps_applied = 0;
+}
+
+static int build_solver(srv *s, srv_job *j, rad_error *err)
+{
+	srv_runner *r = NULL;
+	if (srv_runner_new(s, j, on_progress, j, &r, err) != 0)
+		return -1;
+	/* Seen by the I/O thread from here on (memory, the cancel flag). */
+	pthread_mutex_lock(&j->mu);
+	j->runner = r;
+	j->solver_iter = 0;
+	j->eps_applied = 0;
+	if (stop_wanted_locked(s, j))
+		srv_job_raise_cancel_locked(j);
+	pthread_mutex_unlock(&j->mu);
+	if (srv_runner_build(r, err) != RAD_OK) {
+		drop_runner(j);
+		return -1;
+	}
 	return 0;
 }
 
@@ -383,15 +415,15 @@ static void finish(srv *s, srv_job *j, srv_job_state st, const char *error)
 		srv_sol_ref(sol);
 	else
 		sol = NULL;
-	rad_solver *drop = NULL;
+	srv_runner *drop = NULL;
 	if (srv_job_terminal(st)) {
 		memset(j->solver_mem, 0, sizeof(j->solver_mem));
 		j->target.complete = 1;
-		drop = j->solver;
-		j->solver = NULL;
+		drop = j->runner;
+		j->runner = NULL;
 	}
 	pthread_mutex_unlock(&j->mu);
-	rad_solver_free(drop);
+	srv_runner_free(drop);
 	if (srv_job_persist(s, j, sol, (int)st, msg, sizeof(msg)) != 0)
 		srv_error("job %llu: cannot record state %s: %s",
 		          (unsigned long long)j->id, srv_job_state_name(st),
@@ -423,8 +455,8 @@ static int replay(srv *s, srv_job *j, job_action *stop, rad_error *err)
 			return -1;
 		if (*stop != ACT_STEP)
 			break;
-		if (rad_solver_converge(j->solver, j->opt.converge_tol, 1,
-		                        err) != RAD_OK)
+		if (srv_runner_step(j->runner, j->opt.converge_tol, err) !=
+		    RAD_OK)
 			return -1;
 		j->solver_iter++;
 	}
@@ -473,8 +505,8 @@ static void arm_budget_locked(srv_job *j)
  */
 static job_action ensure_solver(srv *s, srv_job *j, rad_error *err)
 {
-	while (!j->solver) {
-		if (build_solver(j, err) == 0)
+	while (!j->runner) {
+		if (build_solver(s, j, err) == 0)
 			break;
 		if (err->code != RAD_ERR_CANCELLED)
 			return ACT_FAIL;
@@ -483,6 +515,42 @@ static job_action ensure_solver(srv *s, srv_job *j, rad_error *err)
 			return a;
 	}
 	return ACT_STEP;
+}
+
+/* 1 when the job's solver process is gone (died or killed). */
+static int runner_gone(srv_job *j, char *why, size_t len)
+{
+	pthread_mutex_lock(&j->mu);
+	int gone = j->runner && srv_runner_gone(j->runner, why, len);
+	pthread_mutex_unlock(&j->mu);
+	return gone;
+}
+
+/*
+ * A solver at the published iteration: a process that died while the
+ * job waited is replaced, the solver built, and a new one replayed.
+ */
+static job_action prepare(srv *s, srv_job *j, int first, rad_error *err)
+{
+	char why[256];
+	if (runner_gone(j, why, sizeof(why))) {
+		srv_info("job %llu: a new solver process replaces the one "
+		         "that ended while the job waited (%s)",
+		         (unsigned long long)j->id, why);
+		drop_runner(j);
+	}
+	job_action a = ensure_solver(s, j, err);
+	if (a == ACT_STEP && j->solver_iter < j->iteration) {
+		if (replay(s, j, &a, err) != 0)
+			a = ACT_FAIL;
+		if (first) {
+			pthread_mutex_lock(&j->mu);
+			arm_budget_locked(j); /* the replay is not the
+			                         job's time */
+			pthread_mutex_unlock(&j->mu);
+		}
+	}
+	return a;
 }
 
 static void run_job(srv *s, srv_job *j)
@@ -495,24 +563,39 @@ static void run_job(srv *s, srv_job *j)
 	pthread_mutex_lock(&j->mu);
 	arm_budget_locked(j);
 	pthread_mutex_unlock(&j->mu);
-	a = ensure_solver(s, j, &err);
-	if (a == ACT_STEP && j->solver_iter < j->iteration) {
-		if (replay(s, j, &a, &err) != 0)
-			a = ACT_FAIL;
-		pthread_mutex_lock(&j->mu);
-		arm_budget_locked(j); /* the replay is not the job's time */
-		pthread_mutex_unlock(&j->mu);
-	}
+	a = prepare(s, j, 1, &err);
 	while (a == ACT_STEP) {
 		a = next_action(s, j, &err);
 		if (a != ACT_STEP)
 			break;
+		if (!j->runner) { /* killed for not stopping: a new one */
+			a = prepare(s, j, 0, &err);
+			continue;
+		}
 		j->step_t0 = rad_seconds();
-		rad_status st = rad_solver_converge(
-		        j->solver, j->opt.converge_tol, 1, &err);
-		if (st == RAD_ERR_CANCELLED)
+		rad_status st =
+		        srv_runner_step(j->runner, j->opt.converge_tol, &err);
+		if (st == RAD_ERR_CANCELLED) {
+			if (runner_gone(j, NULL, 0))
+				drop_runner(j);
 			continue; /* next_action tells why */
+		}
 		if (st != RAD_OK) {
+			if (runner_gone(j, NULL, 0)) {
+				size_t n = strlen(err.msg);
+				if (j->iteration > 0)
+					snprintf(
+					        err.msg + n,
+					        sizeof(err.msg) - n,
+					        " during iteration %u; the job "
+					        "keeps iteration %u's solution",
+					        j->solver_iter + 1,
+					        j->iteration);
+				else
+					snprintf(err.msg + n,
+					         sizeof(err.msg) - n,
+					         " during iteration 1");
+			}
 			a = ACT_FAIL;
 			break;
 		}
@@ -546,12 +629,17 @@ static double budget_tick(el_loop *l, void *ud, double now)
 		if (j->on_worker && j->deadline > 0 && now >= j->deadline &&
 		    !j->replaying)
 			srv_job_raise_cancel_locked(j);
-		if (j->on_worker && j->solver) {
-			rad_mem_report m;
-			rad_solver_memory(j->solver, &m);
-			for (int k = 0; k < RAD_MEM_NKINDS; k++)
-				j->solver_mem[k] =
-				        m.bytes[k] > 0 ? m.bytes[k] : 0;
+		if (j->on_worker && j->runner)
+			srv_runner_memory(j->runner, j->solver_mem);
+		/* A waiting job's process that died: reaped, its memory
+		 * let go; the job replays a new one when it runs. */
+		char why[256];
+		if (!j->on_worker && j->runner && srv_runner_pid(j->runner) &&
+		    srv_runner_gone(j->runner, why, sizeof(why))) {
+			srv_warn("job %llu: %s while the job waited; a new one "
+			         "replays it when it runs",
+			         (unsigned long long)j->id, why);
+			memset(j->solver_mem, 0, sizeof(j->solver_mem));
 		}
 		pthread_mutex_unlock(&j->mu);
 	}

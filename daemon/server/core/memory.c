@@ -67,13 +67,13 @@ void srv_memory_limit_apply(srv *s)
 
 int srv_memory_full(const srv *s, char *why, size_t len)
 {
-	int64_t held = rad_mem_process_bytes();
+	int64_t held = rad_mem_limit_held(); /* solver processes too */
 	if (s->mem_limit <= 0 || held < s->mem_limit)
 		return 0;
 	if (why)
 		snprintf(why, len,
 		         "the daemon's memory limit is reached: scenes, jobs "
-		         "and "
+		         "(their solver processes included) and "
 		         "solutions hold %.1f MiB of %.1f MiB (memory_limit); "
 		         "delete "
 		         "some or raise the limit",

@@ -13,9 +13,13 @@
  * tasks for a pool, and their replies come back through the inbox.
  *   - workers (cfg.workers) step jobs: one worker holds a job from
  *     queued to paused/done/failed/cancelled and is the only thread that
- *     touches its rad_solver.  After each iteration it publishes the
- *     stats (JSON text) and a rad_solution under the job's mutex, posts
- *     an iteration event to the inbox, and checkpoints when due;
+ *     steps its solver.  After each iteration it publishes the stats
+ *     (JSON text) and a rad_solution under the job's mutex, posts an
+ *     iteration event to the inbox, and checkpoints when due;
+ *   - the solver itself runs, by default (isolation = process), in a
+ *     solver process of the job's own (runner.h): the worker sends it
+ *     commands and waits for its replies, so a crash in the engine ends
+ *     that process, fails that job and nothing else;
  *   - the query pool (cfg.query_threads) answers query.* and export
  *     from a published solution it holds a reference to; it never waits
  *     for a step;
@@ -35,9 +39,12 @@
  *               job->mu (enqueue), never the other way round.
  *   inbox_mu    the inbox list.  A leaf lock.
  *   pool->mu    a pool's task list.  A leaf lock.
- * The engine's cancel flag (job->cancel) is written with atomic stores
- * by the I/O thread (pause, cancel, budgets, shutdown) and by the
- * stepping thread (its own budget check in the progress callback).
+ * The engine's cancel flag (the runner's: in a page the solver process
+ * maps, or the runner's own for a thread) is written with atomic stores
+ * under job->mu by the I/O thread (pause, cancel, budgets, shutdown) and
+ * by the worker (its own budget check on progress).  A solver process
+ * that has not stopped solver_stop_timeout after it was raised is
+ * killed, so no engine phase can hold a job, or a shutdown, for long.
  *
  * Ownership.  Scenes, jobs and solutions are refcounted (atomic): the
  * registry holds one reference, each job holds its scene, each
@@ -86,7 +93,10 @@
  * accepting; raise every running job's cancel flag; workers record their
  * job as queued and checkpoint it; then the pools finish their tasks
  * (srv_core_quiesce), every connection gets shutting_down, output is
- * flushed (bounded), and the process exits 0.
+ * flushed (bounded), the solver processes are told to quit (and killed
+ * after 2 s), and the process exits 0.  Solver processes ignore SIGINT,
+ * SIGTERM and SIGHUP (a terminal's ^C or a service manager's stop is the
+ * daemon's to handle) and die with the daemon (PR_SET_PDEATHSIG).
  *
  */
 #include <errno.h>
@@ -101,6 +111,7 @@
 
 #include "core.h"
 #include "log.h"
+#include "runner.h"
 
 /* ------------------------------------------------------------------ start */
 
@@ -123,7 +134,14 @@ int srv_core_init(srv *s, const srv_config *cfg, el_loop *loop, char *msg,
 	pthread_cond_init(&s->runq_cv, NULL);
 	atomic_store(&s->ckpt_interval_ms,
 	             (long long)(cfg->checkpoint_interval_s * 1000.0));
+	atomic_store(&s->isolation, (int)cfg->isolation);
+	atomic_store(&s->solver_stop_ms,
+	             (long long)(cfg->solver_stop_timeout_s * 1000.0));
+	snprintf(s->worker_exe, sizeof(s->worker_exe), "/proc/self/exe");
+	s->mem_share_fd = -1;
 	srv_memory_limit_apply(s);
+	if (srv_runner_share_init(s, msg, msglen) != 0)
+		return -1;
 
 	long cores = sysconf(_SC_NPROCESSORS_ONLN);
 	int w = cfg->workers > 0 ? cfg->workers : 1;
@@ -168,6 +186,9 @@ void srv_core_reconfigure(srv *s, const srv_config *cfg)
 {
 	s->cfg = *cfg;
 	srv_memory_limit_apply(s);
+	atomic_store(&s->isolation, (int)cfg->isolation);
+	atomic_store(&s->solver_stop_ms,
+	             (long long)(cfg->solver_stop_timeout_s * 1000.0));
 	atomic_store(&s->ckpt_interval_ms,
 	             (long long)(cfg->checkpoint_interval_s * 1000.0));
 }
@@ -214,6 +235,7 @@ void srv_core_destroy(srv *s)
 	pthread_mutex_destroy(&s->inbox_mu);
 	pthread_mutex_destroy(&s->runq_mu);
 	pthread_cond_destroy(&s->runq_cv);
+	srv_runner_share_fini(s);
 }
 
 /* ---------------------------------------------------------------- summary */
