@@ -29,13 +29,14 @@
 #include "harness.h"
 
 typedef struct bench_args {
-	const char *scene; /* NULL: generated hall-full */
-	int runs;          /* N for (a) and (c) */
-	int threads;       /* engine threads, both sides */
-	int points;        /* (b) points per query */
-	int queries;       /* (b) Q */
-	int subscribers;   /* (c) */
-	double eps;        /* 0: engine default */
+	const char *scene;     /* NULL: generated hall-full */
+	int runs;              /* N for (a) and (c) */
+	int threads;           /* engine threads, both sides */
+	int points;            /* (b) points per query */
+	int queries;           /* (b) Q */
+	int subscribers;       /* (c) */
+	double eps;            /* 0: engine default */
+	const char *isolation; /* the daemon's isolation [process] */
 	int json;
 } bench_args;
 
@@ -57,6 +58,8 @@ static void usage(FILE *f)
 	        "  --points N         points per query for (b) [10000]\n"
 	        "  --queries N        queries for (b) [10]\n"
 	        "  --subscribers N    subscribers for (c) [50]\n"
+	        "  --isolation MODE   the daemon's: process or thread "
+	        "[process]\n"
 	        "  --json             one JSON object on stdout\n"
 	        "Times in seconds; no pass/fail on speed.\n");
 }
@@ -206,7 +209,8 @@ static int parse_args(int argc, char **argv, bench_args *a)
 	                  .threads = 1,
 	                  .points = 10000,
 	                  .queries = 10,
-	                  .subscribers = 50};
+	                  .subscribers = 50,
+	                  .isolation = "process"};
 	for (int i = 1; i < argc; i++) {
 		const char *o = argv[i];
 		const char *v = i + 1 < argc ? argv[i + 1] : NULL;
@@ -237,6 +241,8 @@ static int parse_args(int argc, char **argv, bench_args *a)
 			a->queries = atoi(v);
 		else if (!strcmp(o, "--subscribers"))
 			a->subscribers = atoi(v);
+		else if (!strcmp(o, "--isolation"))
+			a->isolation = v;
 		else {
 			usage(stderr);
 			return -1;
@@ -344,6 +350,8 @@ int main(int argc, char **argv)
 	                       "1000000",
 	                       "--log-level",
 	                       "warn",
+	                       "--isolation",
+	                       a.isolation,
 	                       NULL};
 	dm_daemon *d = dm_start(dargs);
 	dm_conn *c = dm_open(d, NULL);
@@ -396,16 +404,17 @@ int main(int argc, char **argv)
 
 	if (a.json) {
 		json_t *o = json_pack(
-		        "{s:s, s:i, s:i, s:{s:f, s:f, s:f, s:f, s:f, s:I, "
+		        "{s:s, s:s, s:i, s:i, s:{s:f, s:f, s:f, s:f, s:f, s:I, "
 		        "s:I}, "
 		        "s:{s:i, s:i, s:f, s:f, s:f, s:I}, s:{s:i, s:f, s:f, "
 		        "s:f, "
 		        "s:I}}",
-		        "scene", scene, "runs", n, "threads", a.threads,
-		        "solve", "daemon_s", m_dw, "daemon_engine_s", m_de,
-		        "cli_solve_s", m_cs, "cli_process_s", m_cw, "ratio",
-		        m_dw / m_cs, "daemon_iterations", dit, "cli_iterations",
-		        cit, "query", "points", a.points, "queries", a.queries,
+		        "scene", scene, "isolation", a.isolation, "runs", n,
+		        "threads", a.threads, "solve", "daemon_s", m_dw,
+		        "daemon_engine_s", m_de, "cli_solve_s", m_cs,
+		        "cli_process_s", m_cw, "ratio", m_dw / m_cs,
+		        "daemon_iterations", dit, "cli_iterations", cit,
+		        "query", "points", a.points, "queries", a.queries,
 		        "p50_ms", p50, "p99_ms", p99, "cli_query_ms",
 		        cli_q * 1e3, "iterations", qit, "fanout", "subscribers",
 		        a.subscribers, "none_s", m_w0, "with_s", m_w1, "ratio",

@@ -54,8 +54,9 @@ fi
 import json, os, sys
 d = json.load(open(sys.argv[1]))
 s, q, f = d["solve"], d["query"], d["fanout"]
-print("scene %s, engine threads %d, median of %d runs (times in seconds)"
-      % (os.path.basename(d["scene"]), d["threads"], d["runs"]))
+print("scene %s, engine threads %d, isolation %s, median of %d runs "
+      "(times in seconds)" % (os.path.basename(d["scene"]), d["threads"],
+                              d["isolation"], d["runs"]))
 print()
 print("| measure | value |")
 print("|---|---|")
