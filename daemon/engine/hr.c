@@ -345,6 +345,15 @@ static rad_status hr_step(rad_solver *sv, rad_error *err)
 		        st->init_row, sv->scene->npolys);
 	if (rs)
 		return wave_failed(sv, rs, err);
+	if (st->wave.force_store) {
+		/* Cancelled during refinement: the links stay at the level
+		 * reached, and the gather waits for the next step.  The
+		 * radiosity is the last iteration's (a split copies B to
+		 * the children), so the solution stays consistent, and the
+		 * caller gets control back without a pass over every link
+		 * (the link counts too stay the last iteration's). */
+		return wave_step_end(sv, &st->wave, err);
+	}
 	rad_solver_progress(sv, 0.8);
 	/* The row sums' payload only once it is needed (node_extra). */
 	gather_job g = {h, {1, 1, 1}, NULL, NULL, NULL};

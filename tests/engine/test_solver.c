@@ -11,6 +11,7 @@
  *  - results are bit-identical for 1 and 2 threads.
  */
 #include <math.h>
+#include <pthread.h>
 #include <setjmp.h>
 #include <stdarg.h>
 #include <stddef.h>
@@ -18,6 +19,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 
 #include <cmocka.h>
 #include <unistd.h>
@@ -772,6 +774,105 @@ static void test_unclustered_first_step_stops_on_cancel(void **state)
 	}
 }
 
+/*
+ * hr, clustered, cancelled in a later step's refinement: the links stay
+ * at the level reached, the gather waits for the next step, so the
+ * radiosity is the last iteration's (queried lux within rounding: a leaf
+ * split meanwhile sums what its parent held), and stepping goes on from
+ * there.  The flag is raised from another
+ * thread after a delay; a delay that lands after the refinement (the
+ * step completes) is tried shorter.
+ */
+typedef struct delayed_flag {
+	volatile int *flag;
+	double delay_s, raised_at;
+} delayed_flag;
+
+static void *raise_later(void *ud)
+{
+	delayed_flag *d = ud;
+	struct timespec ts = {
+	        (time_t)d->delay_s,
+	        (long)((d->delay_s - (double)(time_t)d->delay_s) * 1e9)};
+	nanosleep(&ts, NULL);
+	d->raised_at = rad_seconds();
+	__atomic_store_n(d->flag, 1, __ATOMIC_RELAXED);
+	return NULL;
+}
+
+static void test_hr_cancelled_refinement_keeps_radiosity(void **state)
+{
+	(void)state;
+	static const double pts[2][6] = {{0.5, 0.01, 0.5, 0, 1, 0},
+	                                 {0.01, 0.3, 0.7, 1, 0, 0}};
+	rad_scene *s = generated_scene("box --subdiv 12 --rho 0.5");
+	int cancelled = 0;
+	for (double delay = 0.2; delay > 0.001 && !cancelled; delay /= 2) {
+		rad_options o;
+		rad_options_default(&o);
+		o.threads = 2;
+		o.eps = 1e-6;
+		volatile int flag = 0;
+		o.cancel = &flag;
+		rad_solver *sv = NULL;
+		rad_error err;
+		assert_int_equal(rad_solver_new(s, &o, &sv, &err), RAD_OK);
+		for (int i = 0; i < 2; i++)
+			assert_int_equal(rad_solver_step(sv, &err), RAD_OK);
+		double before[2], after[2];
+		rad_stats a, b;
+		rad_solver_stats(sv, &a);
+		assert_int_equal(
+		        rad_solver_illuminance(sv, &pts[0][0], 2, before, &err),
+		        RAD_OK);
+		delayed_flag d = {&flag, delay, 0};
+		pthread_t t;
+		double t0 = rad_seconds();
+		assert_int_equal(pthread_create(&t, NULL, raise_later, &d), 0);
+		rad_status st = rad_solver_step(sv, &err);
+		double back = rad_seconds();
+		pthread_join(t, NULL);
+		if (st == RAD_ERR_CANCELLED) {
+			cancelled = 1;
+			rad_solver_stats(sv, &b);
+			assert_int_equal(b.iteration, a.iteration);
+			assert_int_equal(rad_solver_illuminance(sv, &pts[0][0],
+			                                        2, after, &err),
+			                 RAD_OK);
+			/* The same radiosity; only a split leaf's rounding
+			 * (children sum what their parent held) differs. */
+			double rel =
+			        fmax(fabs(after[0] - before[0]) / before[0],
+			             fabs(after[1] - before[1]) / before[1]);
+			if (!(rel <= 1e-9))
+				fail_msg("lux %.17g %.17g after the cancelled "
+				         "step, %.17g %.17g before",
+				         after[0], after[1], before[0],
+				         before[1]);
+			print_message("cancelled %.3f s into the step, back "
+			              "%.3f s after the flag, lux within %.1e: "
+			              "%s\n",
+			              d.raised_at - t0, back - d.raised_at, rel,
+			              err.msg);
+			flag = 0;
+			assert_int_equal(rad_solver_step(sv, &err), RAD_OK);
+			rad_solver_stats(sv, &b);
+			assert_int_equal(b.iteration, a.iteration + 1);
+			assert_true(b.links >= a.links);
+			assert_int_equal(rad_solver_illuminance(sv, &pts[0][0],
+			                                        2, after, &err),
+			                 RAD_OK);
+			assert_true(after[0] > 0 && after[1] > 0);
+		} else {
+			assert_int_equal(st, RAD_OK);
+		}
+		rad_solver_free(sv);
+	}
+	if (!cancelled)
+		fail_msg("no delay cancelled the step during its refinement");
+	rad_scene_free(s);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -793,6 +894,7 @@ int main(void)
 	        cmocka_unit_test(test_bad_options_refused),
 	        cmocka_unit_test(test_subdivided_furnace_emission),
 	        cmocka_unit_test(test_unclustered_first_step_stops_on_cancel),
+	        cmocka_unit_test(test_hr_cancelled_refinement_keeps_radiosity),
 	};
 	/* LUXRAD_TEST_FILTER=pattern runs a subset (cmocka wildcards). */
 	if (getenv("LUXRAD_TEST_FILTER"))
