@@ -207,6 +207,7 @@ struct srv_job {
 	 * and reaps a process that died while the job waited; only the
 	 * worker holding the job steps it. */
 	srv_runner *runner;
+	double stop_asked; /* rad_seconds() the flag was raised at, or 0 */
 
 	/* worker-owned */
 	uint32_t solver_iter; /* iterations the solver has done */

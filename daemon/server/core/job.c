@@ -143,8 +143,11 @@ void srv_job_raise_cancel_locked(srv_job *j)
 	/* Not while replaying: an interrupted replay step would differ
 	 * from the original one.  Requests are checked between steps.  No
 	 * runner yet: attach_runner raises it if a request is pending. */
-	if (!j->replaying && j->runner)
+	if (!j->replaying && j->runner) {
 		srv_runner_raise(j->runner);
+		if (j->stop_asked == 0)
+			j->stop_asked = rad_seconds();
+	}
 }
 
 /* A request is pending that the cancel flag stands for (caller holds
@@ -317,6 +320,7 @@ static job_action next_action(srv *s, srv_job *j, rad_error *err)
 	pthread_mutex_lock(&j->mu);
 	if (j->runner)
 		srv_runner_lower(j->runner);
+	j->stop_asked = 0;
 	if (j->cancel_req)
 		a = ACT_CANCEL;
 	else if (j->pause_req)
@@ -424,10 +428,15 @@ static void finish(srv *s, srv_job *j, srv_job_state st, const char *error)
 	}
 	pthread_mutex_unlock(&j->mu);
 	srv_runner_free(drop);
+	double t0 = rad_seconds();
 	if (srv_job_persist(s, j, sol, (int)st, msg, sizeof(msg)) != 0)
 		srv_error("job %llu: cannot record state %s: %s",
 		          (unsigned long long)j->id, srv_job_state_name(st),
 		          msg);
+	else
+		srv_debug("job %llu: state %s recorded%s in %.3f s",
+		          (unsigned long long)j->id, srv_job_state_name(st),
+		          sol ? " with a checkpoint" : "", rad_seconds() - t0);
 	srv_sol_unref(s, sol);
 	srv_info("job %llu: %s at iteration %u%s%s", (unsigned long long)j->id,
 	         srv_job_state_name(st), j->solver_iter, error ? ": " : "",
@@ -576,6 +585,16 @@ static void run_job(srv *s, srv_job *j)
 		rad_status st =
 		        srv_runner_step(j->runner, j->opt.converge_tol, &err);
 		if (st == RAD_ERR_CANCELLED) {
+			pthread_mutex_lock(&j->mu);
+			double asked = j->stop_asked;
+			pthread_mutex_unlock(&j->mu);
+			if (asked > 0)
+				srv_debug(
+				        "job %llu: iteration %u stopped %.3f s "
+				        "after it was asked to",
+				        (unsigned long long)j->id,
+				        j->solver_iter + 1,
+				        rad_seconds() - asked);
 			if (runner_gone(j, NULL, 0))
 				drop_runner(j);
 			continue; /* next_action tells why */
