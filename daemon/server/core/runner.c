@@ -46,8 +46,8 @@ struct srv_runner {
 	int fault;      /* LUXRAD_TEST_FAULT for this job */
 
 	/* process */
-	pid_t pid;        /* 0 once reaped */
-	int fd;           /* the control socket, -1 once closed */
+	pid_t pid; /* 0 once reaped; stored atomically: job.info reads it */
+	int fd;    /* the control socket, -1 once closed */
 	srv_wpage *page;  /* mapped, shared with the process */
 	int gone;         /* died or killed (atomic) */
 	char why[256];    /* how it went */
@@ -190,7 +190,7 @@ static void mark_gone(srv_runner *r, const char *how_if_unknown)
 			snprintf(how, sizeof(how), "%s", how_if_unknown);
 		snprintf(r->why, sizeof(r->why),
 		         "the solver process (pid %d) %s", (int)r->pid, how);
-		r->pid = 0;
+		__atomic_store_n(&r->pid, 0, __ATOMIC_RELAXED);
 	}
 	if (r->page && r->s->mem_share) {
 		int64_t own =
@@ -384,7 +384,7 @@ static int spawn(srv_runner *r, rad_error *err)
 		goto nomem;
 	int e = posix_spawn(&r->pid, r->s->worker_exe, &fa, &at, argv, environ);
 	if (e != 0) {
-		r->pid = 0;
+		__atomic_store_n(&r->pid, 0, __ATOMIC_RELAXED);
 		rad_fail(err, RAD_ERR_NOMEM,
 		         "cannot start a solver process (%s): %s",
 		         r->s->worker_exe, strerror(e));
@@ -621,7 +621,7 @@ int srv_runner_gone(srv_runner *r, char *why, size_t len)
 			snprintf(r->why, sizeof(r->why),
 			         "the solver process (pid %d) %s", (int)r->pid,
 			         how);
-			r->pid = 0;
+			__atomic_store_n(&r->pid, 0, __ATOMIC_RELAXED);
 			mark_gone(r, "");
 		}
 	}
@@ -633,8 +633,9 @@ int srv_runner_gone(srv_runner *r, char *why, size_t len)
 
 pid_t srv_runner_pid(const srv_runner *r)
 {
-	return r->page && !__atomic_load_n(&r->gone, __ATOMIC_ACQUIRE) ? r->pid
-	                                                               : 0;
+	return r->page && !__atomic_load_n(&r->gone, __ATOMIC_ACQUIRE)
+	               ? __atomic_load_n(&r->pid, __ATOMIC_RELAXED)
+	               : 0;
 }
 
 void srv_runner_free(srv_runner *r)
@@ -658,7 +659,7 @@ void srv_runner_free(srv_runner *r)
 			nanosleep(&ts, NULL);
 		}
 		if (p == r->pid)
-			r->pid = 0;
+			__atomic_store_n(&r->pid, 0, __ATOMIC_RELAXED);
 		mark_gone(r, "quit"); /* reaps it if it was killed */
 	} else if (r->page) {
 		mark_gone(r, "");
