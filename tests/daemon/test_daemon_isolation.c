@@ -5,8 +5,8 @@
  * Faults are real: LUXRAD_TEST_FAULT=KIND:JOB-NAME in the daemon's
  * environment makes the solver of the job of that name write through a
  * null pointer (segv), abort, or stop listening to its cancel flag
- * (hang), inside the engine's second iteration; a kill -9 from outside
- * stands for the kernel's OOM killer.
+ * (hang, from the start of the step), in the second iteration; a kill -9 from
+ * outside stands for the kernel's OOM killer.
  *  - isolation = thread (what every version before solver processes did):
  *    the segv takes the daemon down, and every other job with it;
  *  - isolation = process (the default): the same segv, an abort or a

@@ -442,7 +442,7 @@ int srv_runner_new(srv *s, srv_job *j, srv_runner_progress progress, void *ud,
 static void thread_progress(void *ud, double fraction)
 {
 	srv_runner *r = ud;
-	if (r->fault && r->steps >= 1)
+	if (r->fault && r->fault != 'h' && r->steps >= 1)
 		srv_fault_commit(r->fault);
 	r->progress(r->ud, fraction);
 }
@@ -504,6 +504,8 @@ rad_status srv_runner_build(srv_runner *r, rad_error *err)
 rad_status srv_runner_step(srv_runner *r, double tol, rad_error *err)
 {
 	if (!r->page) {
+		if (r->fault == 'h' && r->steps >= 1)
+			srv_fault_commit(r->fault);
 		rad_status st = rad_solver_converge(r->sv, tol, 1, err);
 		r->steps += st == RAD_OK;
 		return st;

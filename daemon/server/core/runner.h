@@ -38,8 +38,9 @@
  *
  * Tests inject faults with LUXRAD_TEST_FAULT=KIND:JOB-NAME in the
  * daemon's environment (KIND: segv, abort, hang): the solver process of
- * the job of that name commits it at its first progress report of the
- * job's second iteration.
+ * the job of that name commits it in the job's second iteration, at the
+ * engine's first progress report (segv, abort) or as the step starts
+ * (hang: the engine never sees the cancel flag).
  */
 #ifndef LUXRAD_SRV_RUNNER_H
 #define LUXRAD_SRV_RUNNER_H

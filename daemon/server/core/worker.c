@@ -100,7 +100,7 @@ static void on_progress(void *ud, double fraction)
 	worker *w = ud;
 	__atomic_store(&w->page->fraction, &fraction, __ATOMIC_RELAXED);
 	__atomic_fetch_add(&w->page->progress_seq, 1, __ATOMIC_RELEASE);
-	if (w->fault && w->steps >= 1)
+	if (w->fault && w->fault != 'h' && w->steps >= 1)
 		srv_fault_commit(w->fault);
 }
 
@@ -172,6 +172,8 @@ static void do_step(worker *w, const srv_wstep *in)
 	}
 	rad_mem_set_limit(in->mem_limit);
 	uint64_t refusals = rad_mem_limit_refusals();
+	if (w->fault == 'h' && w->steps >= 1)
+		srv_fault_commit(w->fault);
 	double t0 = rad_seconds();
 	if (rad_solver_converge(w->sv, in->tol, 1, &r.err) == RAD_OK) {
 		w->steps++;
