@@ -41,6 +41,7 @@
  * luxrad-reference, 5.4 % without).
  */
 typedef struct gather_job {
+	const rad_solver *sv; /* its cancel flag: the gather stops early */
 	rad_hier *h;
 	double k[3];    /* scale of what comes from surfaces (1: none) */
 	double *took;   /* per polygon root: A I from surfaces, 3 channels */
@@ -136,7 +137,7 @@ static void gather_roots(void *ud, size_t b, size_t e, int thread)
 {
 	gather_job *g = ud;
 	(void)thread;
-	for (size_t i = b; i < e; i++) {
+	for (size_t i = b; i < e && !rad_solver_cancelled(g->sv); i++) {
 		double *t = g->took + 3 * i;
 		t[0] = t[1] = t[2] = 0;
 		gather_tree(g, (uint32_t)i, t);
@@ -169,8 +170,8 @@ static void gather_pass(rad_solver *sv, gather_job *g, double got[3])
 }
 
 /* The gather, within the energy bound, into g (xe, xc allocated by the
- * caller); returns the scale applied (1 = none, the bound held) or a
- * negative value when out of memory. */
+ * caller); returns the scale applied (1 = none, the bound held), -1 when
+ * out of memory or -2 when cancelled (the gather left unfinished). */
 static double gather_bounded(rad_solver *sv, gather_job *g)
 {
 	uint32_t np = sv->scene->npolys;
@@ -182,11 +183,11 @@ static double gather_bounded(rad_solver *sv, gather_job *g)
 	double got[3];
 	gather_pass(sv, g, got);
 	double worst = node_energy_scale(&sv->h, 0, got, g->k);
-	if (worst < 1)
+	if (worst < 1 && !rad_solver_cancelled(sv))
 		gather_pass(sv, g, got);
 	rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, g->took);
 	g->took = NULL;
-	return worst;
+	return rad_solver_cancelled(sv) ? -2 : worst;
 }
 
 typedef struct push_acc {
@@ -323,6 +324,18 @@ static void release_scratch(rad_solver *sv, hr_state *st)
 	st->vals_cap = 0;
 }
 
+/*
+ * Cancelled after the refinement, before the push: the irradiance
+ * gathered is left unused (the next step gathers again) and the
+ * radiosity is the last iteration's, so the solution stays consistent.
+ */
+static rad_status gather_cancelled(rad_error *err)
+{
+	return rad_fail(err, RAD_ERR_CANCELLED,
+	                "hr: cancelled before the radiosity was updated; the "
+	                "solution is the last iteration's");
+}
+
 static rad_status hr_step(rad_solver *sv, rad_error *err)
 {
 	hr_state *st = sv->impl;
@@ -332,9 +345,22 @@ static rad_status hr_step(rad_solver *sv, rad_error *err)
 	if (!st->started) {
 		rs = hr_initial_links(sv, st);
 		st->started = rs != RAD_ERR_CANCELLED;
+	} else if (st->pending) {
+		rs = hr_refine_pending(sv, st);
 	} else if (!st->frozen) {
 		rs = hr_retest_links(sv, st);
 	}
+	st->pending =
+	        st->started && rs == RAD_ERR_CANCELLED && st->wave.todo.n > 0;
+	if (st->pending)
+		/* The pairs left wait in the scratch lists; the radiosity
+		 * is the last iteration's (no gather over half-made
+		 * links). */
+		return rad_fail(err, rs,
+		                "hr: cancelled during refinement (%zu pairs "
+		                "left for the next step); the solution is the "
+		                "last iteration's",
+		                st->wave.todo.n);
 	release_scratch(sv, st);
 	if (rs == RAD_ERR_CANCELLED)
 		return rad_fail(
@@ -356,7 +382,7 @@ static rad_status hr_step(rad_solver *sv, rad_error *err)
 	}
 	rad_solver_progress(sv, 0.8);
 	/* The row sums' payload only once it is needed (node_extra). */
-	gather_job g = {h, {1, 1, 1}, NULL, NULL, NULL};
+	gather_job g = {sv, h, {1, 1, 1}, NULL, NULL, NULL};
 	int nomem = 0;
 	if (st->clip) {
 		g.xe = rad_mem_calloc(&sv->mem, RAD_MEM_SCRATCH,
@@ -368,14 +394,22 @@ static rad_status hr_step(rad_solver *sv, rad_error *err)
 		                      sizeof(float));
 		nomem = !g.xe || !g.xc;
 	}
-	if (nomem || gather_bounded(sv, &g) < 0) {
+	double worst = nomem ? -1 : gather_bounded(sv, &g);
+	if (worst < 0) {
 		rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, g.xe);
 		rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, g.xc);
+		if (worst == -2)
+			return gather_cancelled(err);
 		return wave_failed(sv, RAD_ERR_NOMEM, err);
 	}
 	rad_solver_progress(sv, 0.95);
 	int first = sv->stats.iteration == 0;
 	hr_walk_all(sv, study_node, &first);
+	if (rad_solver_cancelled(sv)) {
+		rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, g.xe);
+		rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, g.xc);
+		return gather_cancelled(err);
+	}
 	memmove(st->chg[1], st->chg[0], 2 * sizeof(st->chg[0]));
 	double r = push_and_update(h, &g, &st->mean_B, st->chg[0]);
 	rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, g.xe);

@@ -21,6 +21,7 @@ typedef struct hr_state {
 	double mean_B;     /* area-mean photopic radiosity of the last step */
 	double last_r;     /* residual of the last step */
 	int frozen;        /* refinement stopped (hr_step) */
+	int pending;       /* a cancelled re-test left pairs in wave.todo */
 	int clip;          /* leaves' gain held below 1 (node_extra) */
 	double chg[3][3];  /* sum A |dB| per channel, last three steps */
 	double q_jump;     /* rate of the last extrapolation (tail) */
@@ -32,8 +33,14 @@ typedef struct hr_state {
 /* The first step's links (hr_refine.c): the root cluster's self-link and
  * the lights', refined; without clustering, every pair of polygons. */
 rad_status hr_initial_links(rad_solver *sv, hr_state *st);
-/* Later steps: re-test every stored link, refine those that fail. */
+/*
+ * Later steps: re-test every stored link, refine those that fail.  A
+ * cancel stops the re-test where it is and the waves within a few
+ * thousand pairs: RAD_ERR_CANCELLED with the pairs not judged yet kept in
+ * st->wave.todo, which hr_refine_pending judges at the next step.
+ */
 rad_status hr_retest_links(rad_solver *sv, hr_state *st);
+rad_status hr_refine_pending(rad_solver *sv, hr_state *st);
 
 /* Pre-order walk over the live nodes (see hier.h on liveness): clusters,
  * then every polygon's quadtree; stops at the first failure. */

@@ -36,6 +36,7 @@
  */
 #include <math.h>
 #include <stdlib.h>
+#include <string.h>
 
 #include "hr.h"
 
@@ -147,17 +148,31 @@ static rad_status expand_splits(rad_solver *sv, hr_state *st)
 	return RAD_OK;
 }
 
-/* Run waves until nothing is left to split. */
+/*
+ * Run waves until nothing is left to split.  A deferrable wave
+ * (st->wave.defer) cancelled part way keeps the pairs it did not judge
+ * at the front of todo, the children of those it split after them, and
+ * returns RAD_ERR_CANCELLED: the next step goes on with them.
+ */
 static rad_status refine_waves(rad_solver *sv, hr_state *st)
 {
-	while (st->wave.todo.n > 0 || st->wave.held.n > 0) {
-		rad_status rs = wave_run(sv, &st->wave, st->wave.todo.v,
-		                         st->wave.todo.n, judge, apply);
-		st->wave.todo.n = 0;
+	rad_wave *w = &st->wave;
+	while (w->todo.n > 0 || w->held.n > 0) {
+		size_t n = w->todo.n;
+		rad_status rs = wave_run(sv, w, w->todo.v, n, judge, apply);
+		size_t left = rs ? 0 : n - w->judged;
+		if (left)
+			memmove(w->todo.v,
+			        (unsigned char *)w->todo.v +
+			                w->judged * w->item_size,
+			        left * w->item_size);
+		w->todo.n = left;
 		if (!rs)
 			rs = expand_splits(sv, st);
 		if (rs)
 			return rs;
+		if (left)
+			return RAD_ERR_CANCELLED;
 	}
 	return RAD_OK;
 }
@@ -400,7 +415,22 @@ rad_status hr_retest_links(rad_solver *sv, hr_state *st)
 {
 	/* Clusters receive isotropically: only the energy test applies. */
 	rad_status rs = walk_cluster(sv, 0, retest_cluster, st);
-	for (uint32_t i = 0; i < sv->scene->npolys && !rs; i++)
+	/* Cancelled: the links not re-tested yet stay as they are. */
+	for (uint32_t i = 0;
+	     i < sv->scene->npolys && !rs && !rad_solver_cancelled(sv); i++)
 		rs = retest_elem(sv, st, i, 0);
-	return rs ? rs : refine_waves(sv, st);
+	if (rs)
+		return rs;
+	st->wave.defer = 1;
+	rs = refine_waves(sv, st);
+	st->wave.defer = 0;
+	return rs;
+}
+
+rad_status hr_refine_pending(rad_solver *sv, hr_state *st)
+{
+	st->wave.defer = 1;
+	rad_status rs = refine_waves(sv, st);
+	st->wave.defer = 0;
+	return rs;
 }

@@ -138,13 +138,28 @@ rad_status wave_run(rad_solver *sv, rad_wave *w, const void *items, size_t n,
 		w->verdict = v;
 		w->verdict_cap = n;
 	}
-	judge_job job = {sv, w, items, judge};
-	rad_par_for(sv->par, n, WAVE_GRAIN, judge_range, &job);
-	for (size_t i = 0; i < n; i++) {
-		rad_status rs =
-		        apply(sv, job.items + i * w->item_size, &w->verdict[i]);
-		if (rs)
-			return rs;
+	/* One block, or blocks of WAVE_DEFER_BLOCK when deferrable: a
+	 * judge only reads the hierarchy, which apply does not change in
+	 * a way it reads (links are stored, pairs held), so the verdicts
+	 * and the order they are applied in are the same either way. */
+	size_t block = w->defer ? WAVE_DEFER_BLOCK : n;
+	w->judged = 0;
+	for (size_t off = 0; off < n; off += block) {
+		size_t m = n - off < block ? n - off : block;
+		judge_job job = {sv, w,
+		                 (const unsigned char *)items +
+		                         off * w->item_size,
+		                 judge};
+		rad_par_for(sv->par, m, WAVE_GRAIN, judge_range, &job);
+		for (size_t i = 0; i < m; i++) {
+			rad_status rs = apply(sv, job.items + i * w->item_size,
+			                      &w->verdict[i]);
+			if (rs)
+				return rs;
+		}
+		w->judged = off + m;
+		if (w->defer && w->judged < n && rad_solver_cancelled(sv))
+			return RAD_OK;
 	}
 	if (rad_solver_cancelled(sv))
 		w->force_store = 1; /* finish at the current level */

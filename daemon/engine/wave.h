@@ -38,7 +38,16 @@ typedef struct rad_wave {
 	uint64_t *rays;     /* per-thread ray counters, SCRATCH */
 	uint32_t item_size; /* bytes per item */
 	int force_store;    /* cancelled: pairs stay at the level reached */
+	int defer;     /* set by the caller: a cancel within a wave stops it
+	                  after the block under way (WAVE_DEFER_BLOCK), the
+	                  items not judged left for the caller to keep */
+	size_t judged; /* wave_run: items judged and applied (all of them
+	                  unless deferred) */
 } rad_wave;
+
+/* Items judged between two looks at the cancel flag in a deferrable
+ * wave: a few milliseconds of form factors. */
+#define WAVE_DEFER_BLOCK 2048
 
 /*
  * Judge one item, on a worker thread: only read the hierarchy, write out

@@ -775,17 +775,20 @@ static void test_unclustered_first_step_stops_on_cancel(void **state)
 }
 
 /*
- * hr, clustered, cancelled in a later step's refinement: the links stay
- * at the level reached, the gather waits for the next step, so the
- * radiosity is the last iteration's (queried lux within rounding: a leaf
- * split meanwhile sums what its parent held), and stepping goes on from
- * there.  The flag is raised from another
- * thread after a delay; a delay that lands after the refinement (the
- * step completes) is tried shorter.
+ * hr, clustered, cancelled in a later step: the step comes back within a
+ * block of pairs (WAVE_DEFER_BLOCK) when the flag rises during the
+ * refinement -- the pairs not judged yet wait for the next step -- and
+ * before the push when it rises at the gather (progress 0.8).  Either
+ * way the radiosity is the last iteration's (queried lux within
+ * rounding: a leaf split meanwhile sums what its parent held), and the
+ * next step goes on to a full iteration.  The refinement's flag is raised
+ * from another thread after a delay; a delay that lands after the
+ * refinement is tried shorter.
  */
 typedef struct delayed_flag {
 	volatile int *flag;
 	double delay_s, raised_at;
+	int at_gather; /* armed: raise at progress 0.8 */
 } delayed_flag;
 
 static void *raise_later(void *ud)
@@ -800,20 +803,39 @@ static void *raise_later(void *ud)
 	return NULL;
 }
 
+/* Progress at the gather (0.8): raise the flag there. */
+static void raise_at_gather(void *ud, double fraction)
+{
+	delayed_flag *d = ud;
+	if (d->at_gather && fraction >= 0.8 && !*d->flag) {
+		d->raised_at = rad_seconds();
+		__atomic_store_n(d->flag, 1, __ATOMIC_RELAXED);
+	}
+}
+
 static void test_hr_cancelled_refinement_keeps_radiosity(void **state)
 {
 	(void)state;
 	static const double pts[2][6] = {{0.5, 0.01, 0.5, 0, 1, 0},
 	                                 {0.01, 0.3, 0.7, 1, 0, 0}};
 	rad_scene *s = generated_scene("box --subdiv 12 --rho 0.5");
-	int cancelled = 0;
-	for (double delay = 0.2; delay > 0.001 && !cancelled; delay /= 2) {
+	/* Delays for the refinement, then 0: at the gather. */
+	static const double delays[] = {0.2,   0.1,   0.05,  0.025,
+	                                0.012, 0.006, 0.003, 0};
+	int in_refinement = 0, at_gather = 0;
+	for (size_t k = 0; k < sizeof(delays) / sizeof(delays[0]); k++) {
+		double delay = delays[k];
+		if (delay > 0 && in_refinement)
+			continue;
 		rad_options o;
 		rad_options_default(&o);
 		o.threads = 2;
 		o.eps = 1e-6;
 		volatile int flag = 0;
 		o.cancel = &flag;
+		delayed_flag d = {&flag, delay, 0, 0};
+		o.progress = raise_at_gather;
+		o.progress_ud = &d;
 		rad_solver *sv = NULL;
 		rad_error err;
 		assert_int_equal(rad_solver_new(s, &o, &sv, &err), RAD_OK);
@@ -825,15 +847,23 @@ static void test_hr_cancelled_refinement_keeps_radiosity(void **state)
 		assert_int_equal(
 		        rad_solver_illuminance(sv, &pts[0][0], 2, before, &err),
 		        RAD_OK);
-		delayed_flag d = {&flag, delay, 0};
 		pthread_t t;
 		double t0 = rad_seconds();
-		assert_int_equal(pthread_create(&t, NULL, raise_later, &d), 0);
+		if (delay > 0)
+			assert_int_equal(
+			        pthread_create(&t, NULL, raise_later, &d), 0);
+		else
+			d.at_gather = 1;
 		rad_status st = rad_solver_step(sv, &err);
 		double back = rad_seconds();
-		pthread_join(t, NULL);
+		if (delay > 0)
+			pthread_join(t, NULL);
 		if (st == RAD_ERR_CANCELLED) {
-			cancelled = 1;
+			if (delay > 0)
+				in_refinement = 1;
+			else
+				at_gather = 1;
+			d.at_gather = 0;
 			rad_solver_stats(sv, &b);
 			assert_int_equal(b.iteration, a.iteration);
 			assert_int_equal(rad_solver_illuminance(sv, &pts[0][0],
@@ -868,8 +898,9 @@ static void test_hr_cancelled_refinement_keeps_radiosity(void **state)
 		}
 		rad_solver_free(sv);
 	}
-	if (!cancelled)
-		fail_msg("no delay cancelled the step during its refinement");
+	if (!in_refinement)
+		fail_msg("no delay cancelled a step during its refinement");
+	assert_true(at_gather);
 	rad_scene_free(s);
 }
 

@@ -676,9 +676,12 @@ rad_status rad_solver_new(const rad_scene *scene, const rad_options *opt,
  * One iteration (refine, gather, push-pull; or one sweep / batch of shots).
  * RAD_ERR_CANCELLED: the cancel flag was raised; the solution published is
  * consistent (refinement stopped at the level reached) and stepping may go
- * on once the flag is lowered.  hr cancelled during refinement returns
- * without its gather: the radiosity (and the statistics) stay the last
- * iteration's until the next step gathers over the links made.  Any other error (NOMEM, EMBREE) leaves a
+ * on once the flag is lowered.  hr comes back within a few thousand
+ * form factors of the flag in its later steps: cancelled during the
+ * refinement, the pairs not judged yet wait for the next step, which
+ * finishes them before its gather; cancelled at the gather, the push is
+ * not made.  Either way the radiosity (and the statistics) stay the last
+ * iteration's.  Any other error (NOMEM, EMBREE) leaves a
  * solver that may be queried and freed, but not stepped again.
  */
 rad_status rad_solver_step(rad_solver *sv, rad_error *err);
