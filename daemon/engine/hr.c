@@ -344,7 +344,8 @@ static rad_status hr_step(rad_solver *sv, rad_error *err)
 	rad_status rs = RAD_OK;
 	if (!st->started) {
 		rs = hr_initial_links(sv, st);
-		st->started = rs != RAD_ERR_CANCELLED;
+		/* Clustered, a cancel leaves pairs pending: started. */
+		st->started = rs != RAD_ERR_CANCELLED || st->wave.todo.n > 0;
 	} else if (st->pending) {
 		rs = hr_refine_pending(sv, st);
 	} else if (!st->frozen) {

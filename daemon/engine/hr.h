@@ -34,7 +34,8 @@ typedef struct hr_state {
  * the lights', refined; without clustering, every pair of polygons. */
 rad_status hr_initial_links(rad_solver *sv, hr_state *st);
 /*
- * Later steps: re-test every stored link, refine those that fail.  A
+ * Later steps: re-test every stored link, refine those that fail (the
+ * clustered first step's waves defer the same way).  A
  * cancel stops the re-test where it is and the waves within a few
  * thousand pairs: RAD_ERR_CANCELLED with the pairs not judged yet kept in
  * st->wave.todo, which hr_refine_pending judges at the next step.

@@ -198,7 +198,7 @@ rad_status hr_initial_links(rad_solver *sv, hr_state *st)
 		if (!rs)
 			rs = push_pair(sv, &st->wave.todo, RAD_TAG_CLUSTER,
 			               RAD_TAG_CLUSTER, 0);
-		return rs ? rs : refine_waves(sv, st);
+		return rs ? rs : hr_refine_pending(sv, st);
 	}
 	/* Without clusters, lights link to every polygon directly. */
 	st->wave.todo.n = 0;

@@ -781,7 +781,9 @@ static void test_unclustered_first_step_stops_on_cancel(void **state)
  * before the push when it rises at the gather (progress 0.8).  Either
  * way the radiosity is the last iteration's (queried lux within
  * rounding: a leaf split meanwhile sums what its parent held), and the
- * next step goes on to a full iteration.  The refinement's flag is raised
+ * next step goes on to a full iteration.  The clustered first step's
+ * waves defer too (the step after it makes iteration 1).  The
+ * refinement's flag is raised
  * from another thread after a delay; a delay that lands after the
  * refinement is tried shorter.
  */
@@ -901,6 +903,46 @@ static void test_hr_cancelled_refinement_keeps_radiosity(void **state)
 	if (!in_refinement)
 		fail_msg("no delay cancelled a step during its refinement");
 	assert_true(at_gather);
+
+	/* The first step defers the same way: its pairs left wait, and the
+	 * next step makes iteration 1 from them. */
+	int first_deferred = 0;
+	for (double delay = 0.05; delay > 0.001 && !first_deferred;
+	     delay /= 2) {
+		rad_options o;
+		rad_options_default(&o);
+		o.threads = 2;
+		o.eps = 1e-6;
+		volatile int flag = 0;
+		o.cancel = &flag;
+		rad_solver *sv = NULL;
+		rad_error err;
+		assert_int_equal(rad_solver_new(s, &o, &sv, &err), RAD_OK);
+		delayed_flag d = {&flag, delay, 0, 0};
+		pthread_t t;
+		assert_int_equal(pthread_create(&t, NULL, raise_later, &d), 0);
+		rad_status st = rad_solver_step(sv, &err);
+		double back = rad_seconds();
+		pthread_join(t, NULL);
+		if (st == RAD_ERR_CANCELLED && strstr(err.msg, "left for")) {
+			first_deferred = 1;
+			print_message("first step: back %.3f s after the flag: "
+			              "%s\n",
+			              back - d.raised_at, err.msg);
+			flag = 0;
+			assert_int_equal(rad_solver_step(sv, &err), RAD_OK);
+			rad_stats b;
+			rad_solver_stats(sv, &b);
+			assert_int_equal(b.iteration, 1);
+			double lux[2];
+			assert_int_equal(rad_solver_illuminance(sv, &pts[0][0],
+			                                        2, lux, &err),
+			                 RAD_OK);
+			assert_true(lux[0] > 0 && lux[1] > 0);
+		}
+		rad_solver_free(sv);
+	}
+	assert_true(first_deferred);
 	rad_scene_free(s);
 }
 
