@@ -815,6 +815,22 @@ static void raise_at_gather(void *ud, double fraction)
 	}
 }
 
+/* hr at eps 1e-6, two threads, d's flag and its progress hook. */
+static rad_solver *fine_hr(const rad_scene *s, delayed_flag *d)
+{
+	rad_options o;
+	rad_options_default(&o);
+	o.threads = 2;
+	o.eps = 1e-6;
+	o.cancel = d->flag;
+	o.progress = raise_at_gather;
+	o.progress_ud = d;
+	rad_solver *sv = NULL;
+	rad_error err;
+	assert_int_equal(rad_solver_new(s, &o, &sv, &err), RAD_OK);
+	return sv;
+}
+
 static void test_hr_cancelled_refinement_keeps_radiosity(void **state)
 {
 	(void)state;
@@ -829,18 +845,10 @@ static void test_hr_cancelled_refinement_keeps_radiosity(void **state)
 		double delay = delays[k];
 		if (delay > 0 && in_refinement)
 			continue;
-		rad_options o;
-		rad_options_default(&o);
-		o.threads = 2;
-		o.eps = 1e-6;
 		volatile int flag = 0;
-		o.cancel = &flag;
 		delayed_flag d = {&flag, delay, 0, 0};
-		o.progress = raise_at_gather;
-		o.progress_ud = &d;
-		rad_solver *sv = NULL;
+		rad_solver *sv = fine_hr(s, &d);
 		rad_error err;
-		assert_int_equal(rad_solver_new(s, &o, &sv, &err), RAD_OK);
 		for (int i = 0; i < 2; i++)
 			assert_int_equal(rad_solver_step(sv, &err), RAD_OK);
 		double before[2], after[2];
@@ -909,16 +917,10 @@ static void test_hr_cancelled_refinement_keeps_radiosity(void **state)
 	int first_deferred = 0;
 	for (double delay = 0.05; delay > 0.001 && !first_deferred;
 	     delay /= 2) {
-		rad_options o;
-		rad_options_default(&o);
-		o.threads = 2;
-		o.eps = 1e-6;
 		volatile int flag = 0;
-		o.cancel = &flag;
-		rad_solver *sv = NULL;
-		rad_error err;
-		assert_int_equal(rad_solver_new(s, &o, &sv, &err), RAD_OK);
 		delayed_flag d = {&flag, delay, 0, 0};
+		rad_solver *sv = fine_hr(s, &d);
+		rad_error err;
 		pthread_t t;
 		assert_int_equal(pthread_create(&t, NULL, raise_later, &d), 0);
 		rad_status st = rad_solver_step(sv, &err);
