@@ -13,6 +13,7 @@
  * daemon stops it), and leaves with _exit: the kernel takes its memory
  * back faster than the engine could free it.
  */
+#include <malloc.h>
 #include <pthread.h>
 #include <signal.h>
 #include <stdio.h>
@@ -192,8 +193,11 @@ static void do_step(worker *w, const srv_wstep *in)
 		note_limit(in->mem_limit, refusals, &r.err);
 	}
 	publish_memory(w);
-	reply(&r);
 	free(bytes);
+	/* The solution's bytes went to the memfd: give the pages back
+	 * rather than keep them in the allocator's free lists. */
+	malloc_trim(0);
+	reply(&r);
 }
 
 static void do_eps(worker *w, double eps)
