@@ -80,7 +80,7 @@ static const cfg_key keys[] = {
          "/etc/luxradd/users",
          "named tokens with roles, one \"NAME ROLE sha256:HEX\" per line "
          "(luxradd user-add writes them); none = no users"},
-        {"tls", K_TLS, F(tls), 0, 0, "MODE", "all",
+        {"tls", K_CHOICE, F(tls), 0, 0, "MODE", "all",
          "TLS on TCP listeners: auto = those beyond loopback (they then need "
          "a certificate), all = every one, off = none (tokens in clear "
          "text)"},
@@ -95,7 +95,7 @@ static const cfg_key keys[] = {
          "jobs solved at the same time (1..256)"},
         {"solver_threads", K_INT, F(solver_threads), 0, 1024, "N", "2",
          "engine threads per job (0..1024); 0 = cores / workers, at least 1"},
-        {"isolation", K_ISOLATION, F(isolation), 0, 0, "MODE", "process",
+        {"isolation", K_CHOICE, F(isolation), 0, 0, "MODE", "process",
          "where a job's solver runs: process = a process of its own, so a "
          "fault in it fails that job alone; thread = the daemon's threads "
          "(no process start, but one fault stops every job)"},
@@ -170,9 +170,32 @@ const cfg_key *cfg_keys(size_t *n)
 	return keys;
 }
 
+/* K_CHOICE keys: the names (value = index) and what one is called in
+ * errors.  Their fields are enums, stored as an int. */
+typedef struct cfg_choice {
+	size_t off;               /* the key's field */
+	const char *const *names; /* NULL-terminated */
+	const char *what;
+} cfg_choice;
+static const char *const tls_names[] = {"auto", "all", "off", NULL};
+static const char *const isolation_names[] = {"process", "thread", NULL};
+static const cfg_choice choices[] = {
+        {offsetof(srv_config, tls), tls_names, "a TLS mode"},
+        {offsetof(srv_config, isolation), isolation_names, "an isolation"},
+};
+_Static_assert(sizeof(srv_tls_mode) == sizeof(int) &&
+                       sizeof(srv_isolation) == sizeof(int),
+               "K_CHOICE fields are int-sized");
+
+static const cfg_choice *choice_of(const cfg_key *k)
+{
+	for (size_t i = 0; i < sizeof(choices) / sizeof(choices[0]); i++)
+		if (choices[i].off == k->off)
+			return &choices[i];
+	return NULL;
+}
+
 static const char *const level_names[] = {"error", "warn", "info", "debug"};
-static const char *const tls_names[] = {"auto", "all", "off"};
-static const char *const isolation_names[] = {"process", "thread"};
 
 /* ------------------------------------------------------------- defaults */
 
@@ -458,20 +481,19 @@ int cfg_set_value(srv_config *c, const cfg_key *k, const char *v, char *msg,
 		        msg, msglen,
 		        "'%s' is not a log level (error, warn, info, debug)",
 		        v);
-	case K_TLS:
-		for (int i = 0; i < 3; i++)
-			if (strcasecmp(v, tls_names[i]) == 0)
-				return *(srv_tls_mode *)p = (srv_tls_mode)i, 0;
-		return srv_fail(msg, msglen,
-		                "'%s' is not a TLS mode (auto, all, off)", v);
-	case K_ISOLATION:
-		for (int i = 0; i < 2; i++)
-			if (strcasecmp(v, isolation_names[i]) == 0)
-				return *(srv_isolation *)p = (srv_isolation)i,
-				                       0;
-		return srv_fail(msg, msglen,
-		                "'%s' is not an isolation (process, thread)",
-		                v);
+	case K_CHOICE: {
+		const cfg_choice *ch = choice_of(k);
+		char names[128] = "";
+		for (int i = 0; ch->names[i]; i++) {
+			if (strcasecmp(v, ch->names[i]) == 0)
+				return *(int *)p = i, 0;
+			snprintf(names + strlen(names),
+			         sizeof(names) - strlen(names), "%s%s",
+			         i ? ", " : "", ch->names[i]);
+		}
+		return srv_fail(msg, msglen, "'%s' is not %s (%s)", v, ch->what,
+		                names);
+	}
 	case K_MODBUS:
 		return mb_config_set(&c->modbus, k->name, v, msg, msglen);
 	default:
@@ -567,12 +589,8 @@ void cfg_fmt_value(const srv_config *c, const cfg_key *k, char *buf, size_t len)
 		snprintf(buf, len, "%s",
 		         level_names[*(const srv_log_level *)p]);
 		break;
-	case K_TLS:
-		snprintf(buf, len, "%s", tls_names[*(const srv_tls_mode *)p]);
-		break;
-	case K_ISOLATION:
-		snprintf(buf, len, "%s",
-		         isolation_names[*(const srv_isolation *)p]);
+	case K_CHOICE:
+		snprintf(buf, len, "%s", choice_of(k)->names[*(const int *)p]);
 		break;
 	case K_SIZE: {
 		uint64_t n = *(const size_t *)p;

@@ -13,19 +13,18 @@
 #define CFG_MAX_KEYS 64 /* rows of the table, at most (asserted) */
 
 typedef enum key_type {
-	K_TCP,       /* host:port, or "none" / "" = off (char array) */
-	K_UNIX,      /* socket path, or "none" / "" = off (char array) */
-	K_DIR,       /* directory path, required (char array) */
-	K_FILE,      /* file path, or "none" / "" = none (char array) */
-	K_BOOL,      /* int 0/1 */
-	K_INT,       /* int within [lo, hi] */
-	K_SIZE,      /* size_t bytes within [lo, hi], K/M/G/T suffixes */
-	K_SECONDS,   /* double seconds within [lo, hi], s/m/h suffixes */
-	K_REAL,      /* double within [lo, hi] */
-	K_LEVEL,     /* srv_log_level */
-	K_TLS,       /* srv_tls_mode: auto, all, off */
-	K_ISOLATION, /* srv_isolation: process, thread */
-	K_MODBUS,    /* a modbus_* key: parsed and printed by mb_config_* */
+	K_TCP,     /* host:port, or "none" / "" = off (char array) */
+	K_UNIX,    /* socket path, or "none" / "" = off (char array) */
+	K_DIR,     /* directory path, required (char array) */
+	K_FILE,    /* file path, or "none" / "" = none (char array) */
+	K_BOOL,    /* int 0/1 */
+	K_INT,     /* int within [lo, hi] */
+	K_SIZE,    /* size_t bytes within [lo, hi], K/M/G/T suffixes */
+	K_SECONDS, /* double seconds within [lo, hi], s/m/h suffixes */
+	K_REAL,    /* double within [lo, hi] */
+	K_LEVEL,   /* srv_log_level */
+	K_CHOICE,  /* an enum: the index of one of choices */
+	K_MODBUS,  /* a modbus_* key: parsed and printed by mb_config_* */
 } key_type;
 
 typedef struct cfg_key {
