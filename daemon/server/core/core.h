@@ -485,6 +485,9 @@ int srv_memory_full(const srv *s, char *why, size_t len);
  * rad_mem_limit_refusals() read refusals_before. */
 void srv_memory_note(const srv *s, uint64_t refusals_before, char *msg,
                      size_t len);
+/* The same for a given limit (a solver, in whichever process it runs). */
+void srv_memory_note_limit(int64_t limit, uint64_t refusals_before, char *msg,
+                           size_t len);
 /*
  * Shutting down: the first call asks the workers to checkpoint and stop;
  * returns 1 once they have, the pools have finished their tasks and the

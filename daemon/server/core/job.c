@@ -566,7 +566,6 @@ static void run_job(srv *s, srv_job *j)
 {
 	rad_error err = {0};
 	job_action a;
-	uint64_t refusals = rad_mem_limit_refusals();
 
 	j->last_ckpt = rad_seconds();
 	pthread_mutex_lock(&j->mu);
@@ -623,11 +622,9 @@ static void run_job(srv *s, srv_job *j)
 		if (rad_seconds() - j->last_ckpt >= iv)
 			checkpoint(s, j);
 	}
-	if (a == ACT_FAIL) {
-		if (err.code == RAD_ERR_NOMEM)
-			srv_memory_note(s, refusals, err.msg, sizeof(err.msg));
+	if (a == ACT_FAIL)
 		finish(s, j, SRV_JOB_FAILED, err.msg);
-	} else
+	else
 		finish(s, j, action_state(a), NULL);
 }
 

@@ -82,15 +82,21 @@ int srv_memory_full(const srv *s, char *why, size_t len)
 	return 1;
 }
 
-void srv_memory_note(const srv *s, uint64_t refusals_before, char *msg,
-                     size_t len)
+void srv_memory_note_limit(int64_t limit, uint64_t refusals_before, char *msg,
+                           size_t len)
 {
-	if (s->mem_limit <= 0 || rad_mem_limit_refusals() == refusals_before)
+	if (limit <= 0 || rad_mem_limit_refusals() == refusals_before)
 		return;
 	size_t n = strlen(msg);
 	if (n + 1 < len)
 		snprintf(msg + n, len - n,
 		         " (the daemon's memory limit, %.1f MiB, would have "
 		         "been passed; memory_limit)",
-		         (double)s->mem_limit / 1048576.0);
+		         (double)limit / 1048576.0);
+}
+
+void srv_memory_note(const srv *s, uint64_t refusals_before, char *msg,
+                     size_t len)
+{
+	srv_memory_note_limit(s->mem_limit, refusals_before, msg, len);
 }

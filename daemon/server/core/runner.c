@@ -438,6 +438,17 @@ int srv_runner_new(srv *s, srv_job *j, srv_runner_progress progress, void *ud,
 	return 0;
 }
 
+/* A thread's solver out of memory because of the limit says so (a
+ * solver process says it itself, worker.c). */
+static rad_status limit_noted(rad_status st, uint64_t refusals_before,
+                              rad_error *err)
+{
+	if (st == RAD_ERR_NOMEM)
+		srv_memory_note_limit(rad_mem_limit(), refusals_before,
+		                      err->msg, sizeof(err->msg));
+	return st;
+}
+
 /* A thread's progress: the job's, after the fault a test asked for. */
 static void thread_progress(void *ud, double fraction)
 {
@@ -457,7 +468,10 @@ rad_status srv_runner_build(srv_runner *r, rad_error *err)
 		o.progress_ud = r;
 		o.cancel = &r->cancel_local;
 		rad_solver *sv = NULL;
-		rad_status st = rad_solver_new(j->scene->scene, &o, &sv, err);
+		uint64_t before = rad_mem_limit_refusals();
+		rad_status st = limit_noted(
+		        rad_solver_new(j->scene->scene, &o, &sv, err), before,
+		        err);
 		/* The I/O thread reads its memory under the job's mutex. */
 		pthread_mutex_lock(&j->mu);
 		r->sv = sv;
@@ -506,7 +520,9 @@ rad_status srv_runner_step(srv_runner *r, double tol, rad_error *err)
 	if (!r->page) {
 		if (r->fault == 'h' && r->steps >= 1)
 			srv_fault_commit(r->fault);
-		rad_status st = rad_solver_converge(r->sv, tol, 1, err);
+		uint64_t before = rad_mem_limit_refusals();
+		rad_status st = limit_noted(
+		        rad_solver_converge(r->sv, tol, 1, err), before, err);
 		r->steps += st == RAD_OK;
 		return st;
 	}

@@ -105,18 +105,6 @@ static void on_progress(void *ud, double fraction)
 		srv_fault_commit(w->fault);
 }
 
-static void note_limit(int64_t limit, uint64_t before, rad_error *err)
-{
-	if (limit <= 0 || rad_mem_limit_refusals() == before)
-		return;
-	size_t n = strlen(err->msg);
-	if (n + 1 < sizeof(err->msg))
-		snprintf(err->msg + n, sizeof(err->msg) - n,
-		         " (the daemon's memory limit, %.1f MiB, would have "
-		         "been passed; memory_limit)",
-		         (double)limit / 1048576.0);
-}
-
 static void do_init(worker *w, unsigned char *buf, size_t len)
 {
 	srv_wreply r;
@@ -137,7 +125,8 @@ static void do_init(worker *w, unsigned char *buf, size_t len)
 	size_t nsensors = 0;
 	if (sio_load(buf + sizeof(in), in.scene_len, &w->scene, &info, &sensors,
 	             &nsensors, &r.err) != RAD_OK) {
-		note_limit(in.mem_limit, refusals, &r.err);
+		srv_memory_note_limit(in.mem_limit, refusals, r.err.msg,
+		                      sizeof(r.err.msg));
 		reply(&r);
 		return;
 	}
@@ -154,7 +143,8 @@ static void do_init(worker *w, unsigned char *buf, size_t len)
 		if (pthread_create(&t, NULL, monitor, w) == 0)
 			pthread_detach(t);
 	} else {
-		note_limit(in.mem_limit, refusals, &r.err);
+		srv_memory_note_limit(in.mem_limit, refusals, r.err.msg,
+		                      sizeof(r.err.msg));
 	}
 	publish_memory(w);
 	reply(&r);
@@ -190,7 +180,8 @@ static void do_step(worker *w, const srv_wstep *in)
 		r.step_s = t1 - t0;
 		r.sol_s = rad_seconds() - t1;
 	} else {
-		note_limit(in->mem_limit, refusals, &r.err);
+		srv_memory_note_limit(in->mem_limit, refusals, r.err.msg,
+		                      sizeof(r.err.msg));
 	}
 	publish_memory(w);
 	free(bytes);
