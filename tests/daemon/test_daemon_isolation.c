@@ -64,6 +64,22 @@ static json_t *named_job(dm_conn *c, const json_t *scene, const char *name)
 	return id;
 }
 
+/* job.run for n more iterations. */
+static void run_iterations(dm_conn *c, const json_t *job, int n)
+{
+	json_decref(dm_ok(c, "{s:s, s:O, s:i}", "cmd", "job.run", "job", job,
+	                  "iterations", n));
+}
+
+/* A daemon whose solvers commit fault ("KIND:JOB-NAME"), with args. */
+static dm_daemon *start_with_fault(const char *fault, const char *const *args)
+{
+	setenv("LUXRAD_TEST_FAULT", fault, 1);
+	dm_daemon *d = dm_start(args);
+	unsetenv("LUXRAD_TEST_FAULT");
+	return d;
+}
+
 static json_t *cornell(dm_conn *c)
 {
 	char buf[512];
@@ -76,8 +92,7 @@ static void reference_lux(dm_conn *c, const json_t *scene, int iterations,
                           double *lux)
 {
 	json_t *job = named_job(c, scene, "reference");
-	json_decref(dm_ok(c, "{s:s, s:O, s:i}", "cmd", "job.run", "job", job,
-	                  "iterations", iterations));
+	run_iterations(c, job, iterations);
 	json_decref(dm_wait_job(c, job, "paused|done", 60000));
 	assert_int_equal(dm_query_points(c, job, pts, NPTS, lux), iterations);
 	json_decref(job);
@@ -86,15 +101,12 @@ static void reference_lux(dm_conn *c, const json_t *scene, int iterations,
 static void test_thread_isolation_a_crash_takes_the_daemon(void **state)
 {
 	(void)state;
-	setenv("LUXRAD_TEST_FAULT", "segv:crasher", 1);
 	const char *args[] = {"--isolation", "thread", NULL};
-	dm_daemon *d = dm_start(args);
-	unsetenv("LUXRAD_TEST_FAULT");
+	dm_daemon *d = start_with_fault("segv:crasher", args);
 	dm_conn *c = dm_open(d, NULL);
 	json_t *sc = cornell(c);
 	json_t *job = named_job(c, sc, "crasher");
-	json_decref(dm_ok(c, "{s:s, s:O, s:i}", "cmd", "job.run", "job", job,
-	                  "iterations", 3));
+	run_iterations(c, job, 3);
 	if (!dm_wait_exit(d, 30000))
 		fail_msg("with isolation = thread, the daemon outlived a "
 		         "segfault in a solve");
@@ -116,10 +128,8 @@ static void crash_fails_one_job(const char *kind, const char *want)
 {
 	char fault[64];
 	snprintf(fault, sizeof(fault), "%s:crasher", kind);
-	setenv("LUXRAD_TEST_FAULT", fault, 1);
 	const char *args[] = {"--workers", "2", NULL};
-	dm_daemon *d = dm_start(args);
-	unsetenv("LUXRAD_TEST_FAULT");
+	dm_daemon *d = start_with_fault(fault, args);
 	dm_conn *c = dm_open(d, NULL);
 	json_t *sc = cornell(c);
 	double alone[NPTS], lux[NPTS];
@@ -127,10 +137,8 @@ static void crash_fails_one_job(const char *kind, const char *want)
 
 	json_t *bystander = named_job(c, sc, "bystander");
 	json_t *crasher = named_job(c, sc, "crasher");
-	json_decref(dm_ok(c, "{s:s, s:O, s:i}", "cmd", "job.run", "job",
-	                  bystander, "iterations", 4));
-	json_decref(dm_ok(c, "{s:s, s:O, s:i}", "cmd", "job.run", "job",
-	                  crasher, "iterations", 3));
+	run_iterations(c, bystander, 4);
+	run_iterations(c, crasher, 3);
 	json_t *info = dm_wait_job(c, crasher, "failed|paused|done", 60000);
 	const char *st = json_string_value(json_object_get(info, "state"));
 	const char *err = error_of(info);
@@ -162,8 +170,7 @@ static void crash_fails_one_job(const char *kind, const char *want)
 	/* The daemon goes on: a new job solves, and the memory the dead
 	 * process held was given back. */
 	json_t *after = named_job(c, sc, "after");
-	json_decref(dm_ok(c, "{s:s, s:O, s:i}", "cmd", "job.run", "job", after,
-	                  "iterations", 4));
+	run_iterations(c, after, 4);
 	json_decref(dm_wait_job(c, after, "paused", 60000));
 	assert_int_equal(dm_query_points(c, after, pts, NPTS, lux), 4);
 	assert_memory_equal(lux, alone, sizeof(lux));
@@ -201,8 +208,7 @@ static void test_a_killed_solver_process_fails_its_job(void **state)
 	json_t *opt = json_pack("{s:i, s:f}", "threads", 1, "eps", 1e-5);
 	json_t *job = dm_job_create(c, sc, "hr", opt);
 	json_decref(opt);
-	json_decref(dm_ok(c, "{s:s, s:O, s:i}", "cmd", "job.run", "job", job,
-	                  "iterations", 1));
+	run_iterations(c, job, 1);
 	long long pid = 0;
 	for (double end = dm_now_ms() + 30000; !pid && dm_now_ms() < end;) {
 		json_t *r =
@@ -244,15 +250,12 @@ static double timed(dm_conn *c, const char *cmd, const json_t *job)
 static void test_a_solver_that_does_not_stop_is_killed(void **state)
 {
 	(void)state;
-	setenv("LUXRAD_TEST_FAULT", "hang:deaf", 1);
 	const char *args[] = {"--solver-stop-timeout", "1s", NULL};
-	dm_daemon *d = dm_start(args);
-	unsetenv("LUXRAD_TEST_FAULT");
+	dm_daemon *d = start_with_fault("hang:deaf", args);
 	dm_conn *c = dm_open(d, NULL);
 	json_t *sc = cornell(c);
 	json_t *job = named_job(c, sc, "deaf");
-	json_decref(dm_ok(c, "{s:s, s:O, s:i}", "cmd", "job.run", "job", job,
-	                  "iterations", 3));
+	run_iterations(c, job, 3);
 	/* Iteration 1 is published, then the solver stops listening. */
 	for (double end = dm_now_ms() + 30000; dm_now_ms() < end;) {
 		json_t *r =
@@ -284,8 +287,7 @@ static void test_a_solver_that_does_not_stop_is_killed(void **state)
 
 	/* And a shutdown with a deaf solver still ends. */
 	json_t *again = named_job(c, sc, "deaf");
-	json_decref(dm_ok(c, "{s:s, s:O, s:i}", "cmd", "job.run", "job", again,
-	                  "iterations", 3));
+	run_iterations(c, again, 3);
 	dm_sleep_ms(1500);
 	double t0 = dm_now_ms();
 	dm_stop(d);
@@ -309,8 +311,7 @@ static void solve_in(const char *isolation, double lux[2][NPTS])
 		json_t *opt = json_pack("{s:i}", "threads", 2);
 		json_t *job = dm_job_create(c, sc, solvers[k], opt);
 		json_decref(opt);
-		json_decref(dm_ok(c, "{s:s, s:O, s:i}", "cmd", "job.run", "job",
-		                  job, "iterations", 3));
+		run_iterations(c, job, 3);
 		json_decref(dm_wait_job(c, job, "paused|done", 60000));
 		dm_query_points(c, job, pts, NPTS, lux[k]);
 		json_decref(job);
