@@ -396,20 +396,19 @@ static rad_status hr_step(rad_solver *sv, rad_error *err)
 		nomem = !g.xe || !g.xc;
 	}
 	double worst = nomem ? -1 : gather_bounded(sv, &g);
+	if (worst >= 0) {
+		rad_solver_progress(sv, 0.95);
+		int first = sv->stats.iteration == 0;
+		hr_walk_all(sv, study_node, &first);
+		if (rad_solver_cancelled(sv))
+			worst = -2; /* before the push: nothing changed yet */
+	}
 	if (worst < 0) {
 		rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, g.xe);
 		rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, g.xc);
 		if (worst == -2)
 			return gather_cancelled(err);
 		return wave_failed(sv, RAD_ERR_NOMEM, err);
-	}
-	rad_solver_progress(sv, 0.95);
-	int first = sv->stats.iteration == 0;
-	hr_walk_all(sv, study_node, &first);
-	if (rad_solver_cancelled(sv)) {
-		rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, g.xe);
-		rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, g.xc);
-		return gather_cancelled(err);
 	}
 	memmove(st->chg[1], st->chg[0], 2 * sizeof(st->chg[0]));
 	double r = push_and_update(h, &g, &st->mean_B, st->chg[0]);

@@ -419,12 +419,7 @@ rad_status hr_retest_links(rad_solver *sv, hr_state *st)
 	for (uint32_t i = 0;
 	     i < sv->scene->npolys && !rs && !rad_solver_cancelled(sv); i++)
 		rs = retest_elem(sv, st, i, 0);
-	if (rs)
-		return rs;
-	st->wave.defer = 1;
-	rs = refine_waves(sv, st);
-	st->wave.defer = 0;
-	return rs;
+	return rs ? rs : hr_refine_pending(sv, st);
 }
 
 rad_status hr_refine_pending(rad_solver *sv, hr_state *st)
