@@ -237,7 +237,7 @@ static rad_status build_cluster(rad_hier *h, uint32_t c, rad_error *err)
 double rad_hier_cover_dist(const rad_hier *h, uint32_t poly)
 {
 	const rad_scene *s = h->scene;
-	double edge = rad_elem_edge(rad_elem_at(h, poly));
+	double edge = rad_elem_edge(h, rad_elem_at(h, poly));
 	if (rad_material_emits(&s->mats[s->polys[poly].mat]))
 		return fmin(0.05 * edge, 1e-3 * s->diag);
 	return fmin(0.15 * edge, 5e-3 * s->diag);
@@ -250,7 +250,7 @@ static void measure_exposed(const rad_hier *h, rad_elem *e)
 	double dist = rad_hier_cover_dist(h, e->poly);
 	rad_patch p;
 	v3 pts[RAD_COVER_SAMPLES];
-	rad_patch_from_floats(&p, e->p0, e->e1, e->e2, e->quad);
+	rad_elem_patch(h, e, &p);
 	int n = rad_patch_scatter(&p, RAD_COVER_SAMPLES, pts), open = 0;
 	for (int k = 0; k < n; k++)
 		open += !rad_vis_covered(v, pts[k], p.n, dist);
@@ -298,15 +298,9 @@ rad_status rad_hier_init(rad_hier *h, const rad_scene *s, rad_mem *mem,
 		return rad_fail(err, RAD_ERR_NOMEM, "hierarchy: out of memory");
 	}
 	for (uint32_t i = 0; i < n; i++) {
-		const rad_poly *p = &s->polys[i];
 		rad_elem *e = rad_elem_at(h, i);
-		memcpy(e->p0, p->p0, sizeof(e->p0));
-		memcpy(e->e1, p->e1, sizeof(e->e1));
-		memcpy(e->e2, p->e2, sizeof(e->e2));
-		e->area = p->area;
 		e->poly = i;
 		e->parent = e->child = e->links = RAD_NONE;
-		e->quad = p->quad;
 		e->exposed = RAD_EXPOSED_ALL;
 		h->order[i] = i;
 	}
@@ -337,34 +331,59 @@ void rad_hier_destroy(rad_hier *h)
 	h->order = NULL;
 }
 
-double rad_elem_edge(const rad_elem *e)
+static double poly_edge(const rad_poly *p)
 {
-	v3 a = v3_f(e->e1), b = v3_f(e->e2);
+	v3 a = v3_f(p->e1), b = v3_f(p->e2);
 	/* The third edge: e2 - e1 (triangle) or the diagonal's sides. */
 	double l = fmax(v3_len(a), v3_len(b));
-	if (!e->quad)
+	if (!p->quad)
 		l = fmax(l, v3_len(v3_sub(b, a)));
 	return l;
 }
 
-int rad_elem_can_split(const rad_hier *h, const rad_elem *e)
+double rad_elem_edge(const rad_hier *h, const rad_elem *e)
 {
-	return e->level < 200 && rad_elem_edge(e) > h->min_edge;
+	/* Halving a float vector is exact, and so is its length's half. */
+	return ldexp(poly_edge(&h->scene->polys[e->poly]), -(int)e->level);
 }
 
-void rad_elem_quarter(const rad_elem *e, int k, float p0[3], float e1[3],
-                      float e2[3])
+int rad_elem_can_split(const rad_hier *h, const rad_elem *e)
+{
+	return e->level < RAD_ELEM_MAX_LEVEL &&
+	       rad_elem_edge(h, e) > h->min_edge;
+}
+
+void rad_region_quarter(float p0[3], float e1[3], float e2[3], int quad, int k)
 {
 	/* Triangle: three corner copies and the inverted centre triangle;
-	 * parallelogram: the four quarter cells.  Same orientation as e. */
-	v3 o = v3_f(e->p0), h1 = v3_scale(v3_f(e->e1), 0.5);
-	v3 h2 = v3_scale(v3_f(e->e2), 0.5);
+	 * parallelogram: the four quarter cells.  Same orientation. */
+	v3 o = v3_f(p0), h1 = v3_scale(v3_f(e1), 0.5);
+	v3 h2 = v3_scale(v3_f(e2), 0.5);
 	v3 org[4] = {o, v3_add(o, h1), v3_add(o, h2),
 	             v3_add(v3_add(o, h1), h2)};
-	int flip = k == 3 && !e->quad;
+	int flip = k == 3 && !quad;
 	v3_store_f(p0, org[k]);
 	v3_store_f(e1, flip ? v3_scale(h1, -1) : h1);
 	v3_store_f(e2, flip ? v3_scale(h2, -1) : h2);
+}
+
+void rad_elem_region(const rad_hier *h, const rad_elem *e, float p0[3],
+                     float e1[3], float e2[3])
+{
+	const rad_poly *p = &h->scene->polys[e->poly];
+	memcpy(p0, p->p0, sizeof(p->p0));
+	memcpy(e1, p->e1, sizeof(p->e1));
+	memcpy(e2, p->e2, sizeof(p->e2));
+	for (int l = 0; l < e->level; l++)
+		rad_region_quarter(p0, e1, e2, p->quad,
+		                   (int)(e->path >> (2 * l)) & 3);
+}
+
+void rad_elem_patch(const rad_hier *h, const rad_elem *e, rad_patch *p)
+{
+	float p0[3], e1[3], e2[3];
+	rad_elem_region(h, e, p0, e1, e2);
+	rad_patch_from_floats(p, p0, e1, e2, rad_elem_quad(h, e));
 }
 
 uint32_t rad_elem_split(rad_hier *h, uint32_t id)
@@ -378,15 +397,13 @@ uint32_t rad_elem_split(rad_hier *h, uint32_t id)
 	e = rad_elem_at(h, id);
 	for (int k = 0; k < 4; k++) {
 		rad_elem *ch = rad_elem_at(h, c + (uint32_t)k);
-		rad_elem_quarter(e, k, ch->p0, ch->e1, ch->e2);
-		ch->area = e->area * 0.25f;
 		ch->poly = e->poly;
 		ch->parent = id;
 		ch->child = ch->links = RAD_NONE;
 		memcpy(ch->B, e->B, sizeof(ch->B));
 		memcpy(ch->dB, e->dB, sizeof(ch->dB));
 		ch->level = (uint8_t)(e->level + 1);
-		ch->quad = e->quad;
+		ch->path = e->path | (uint32_t)k << (2 * e->level);
 		/* Every quarter measures its own: a parent's points can
 		 * miss a cover that a quarter straddles (hier.h). */
 		ch->exposed = e->exposed;
@@ -403,7 +420,7 @@ static rad_status mesh_down(rad_hier *h, uint32_t id, double edge,
                             rad_error *err)
 {
 	rad_elem *e = rad_elem_at(h, id);
-	if (rad_elem_edge(e) <= edge || !rad_elem_can_split(h, e))
+	if (rad_elem_edge(h, e) <= edge || !rad_elem_can_split(h, e))
 		return RAD_OK;
 	uint32_t c = rad_elem_split(h, id);
 	if (c == RAD_NONE)
@@ -493,8 +510,9 @@ static void pull_elem(rad_hier *h, uint32_t id)
 	for (uint32_t k = 0; k < 4; k++) {
 		pull_elem(h, e->child + k);
 		const rad_elem *ch = rad_elem_at(h, e->child + k);
-		acc_node(acc, ch->area, ch->B, ch->dB);
-		area += ch->area;
+		float a = rad_elem_area(h, ch);
+		acc_node(acc, a, ch->B, ch->dB);
+		area += a;
 	}
 	set_avg(e->B, e->dB, acc, area);
 }
@@ -518,9 +536,10 @@ static void pull_cluster(rad_hier *h, uint32_t id)
 		for (uint32_t j = cl->first; j < cl->first + cl->count; j++) {
 			const rad_elem *e = rad_elem_at(h, h->order[j]);
 			const float *n = h->scene->polys[h->order[j]].n;
-			double b = (double)e->area * rad_luma(e->B);
-			double d = (double)e->area * rad_luma(e->dB);
-			acc_node(acc, e->area, e->B, e->dB);
+			float a = rad_elem_area(h, e);
+			double b = (double)a * rad_luma(e->B);
+			double d = (double)a * rad_luma(e->dB);
+			acc_node(acc, a, e->B, e->dB);
 			for (int c = 0; c < 3; c++) {
 				nb[c] += b * n[c];
 				nb[3 + c] += d * n[c];

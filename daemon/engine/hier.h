@@ -54,6 +54,17 @@
  * "U" shows 0.3 A outwards where it shows nothing), so rad_cluster_proj
  * sums exact leaves and the models of clusters two levels down.
  *
+ * Regions.  An element holds no geometry of its own.  Its region is its
+ * polygon's (p0, e1, e2) quartered `level` times: `path` keeps the
+ * quarter taken at each level (0..3; level l in bits 2l-2 and 2l-1), and
+ * rad_elem_region redoes the float operations of each split in the same
+ * order, so the region is bit for bit the one a stored copy would hold.
+ * The area is the polygon's times 4^-level and the longest edge its
+ * times 2^-level, both exact in floating point.  A 32-bit path caps the
+ * depth at RAD_ELEM_MAX_LEVEL (16): an element's edge is then at least
+ * 1/65536 of its polygon's, where the default min_edge stops refinement
+ * at 1/200 of the scene's diagonal.  Storing the region (36 bytes) and
+ * the area made an element 96 bytes; it is 60 now.
  * Covered parts.  Scenes lay panels, windows, luminaires and boards a
  * few millimetres in front of walls and ceilings.  The part of a surface
  * behind such a cover takes no light and sends none, and an element that
@@ -131,6 +142,7 @@
 #ifndef LUXRAD_HIER_H
 #define LUXRAD_HIER_H
 
+#include "ff.h"
 #include "mem.h"
 #include "scene.h"
 #include "vec.h"
@@ -141,17 +153,15 @@
 #define RAD_CLUSTER_LEAF_MAX 4
 
 typedef struct rad_elem {
-	float p0[3], e1[3], e2[3]; /* sub-region of the polygon (scene.h) */
-	float area;                /* m2 */
-	uint32_t poly;             /* root polygon (material, normal, node) */
-	uint32_t parent;           /* RAD_NONE for a root */
+	uint32_t poly;           /* root polygon (geometry, material, normal) */
+	uint32_t parent;         /* RAD_NONE for a root */
 	uint32_t child;          /* first of 4 children, RAD_NONE for a leaf */
 	uint32_t links;          /* head of the links received, or RAD_NONE */
 	float B[3], I[3], dB[3]; /* see DESIGN */
+	uint32_t path;           /* quarter taken at each level (Regions) */
 	uint8_t level;           /* depth below the polygon root */
-	uint8_t quad;            /* copied from the polygon */
 	uint8_t exposed;         /* 0 .. RAD_EXPOSED_ALL (Covered parts) */
-	uint8_t spare;
+	uint8_t spare[2];
 } rad_elem;
 
 typedef struct rad_cluster {
@@ -275,8 +285,30 @@ void rad_hier_destroy(rad_hier *h);
  */
 int rad_hier_check(const rad_hier *h, char *msg, size_t len);
 
+#define RAD_ELEM_MAX_LEVEL 16 /* 2 bits of rad_elem.path a level */
+
+/* Element e's region (Regions): origin and edges, as rad_poly's. */
+void rad_elem_region(const rad_hier *h, const rad_elem *e, float p0[3],
+                     float e1[3], float e2[3]);
+/* Element e's region as a patch (rad_patch_from_floats). */
+void rad_elem_patch(const rad_hier *h, const rad_elem *e, rad_patch *p);
+/* Quarter k (0..3) of the region (p0, e1, e2), in place: the geometry
+ * rad_elem_split gives child k. */
+void rad_region_quarter(float p0[3], float e1[3], float e2[3], int quad, int k);
+
+/* Area of element e, m2: its polygon's times 4^-level (exact). */
+static inline float rad_elem_area(const rad_hier *h, const rad_elem *e)
+{
+	return ldexpf(h->scene->polys[e->poly].area, -2 * (int)e->level);
+}
+/* 1 if e's polygon is a parallelogram, 0 for a triangle. */
+static inline int rad_elem_quad(const rad_hier *h, const rad_elem *e)
+{
+	return h->scene->polys[e->poly].quad;
+}
+
 /* Longest edge of an element's region, metres. */
-double rad_elem_edge(const rad_elem *e);
+double rad_elem_edge(const rad_hier *h, const rad_elem *e);
 /* 1 if the element may be split (its edge exceeds min_edge). */
 int rad_elem_can_split(const rad_hier *h, const rad_elem *e);
 /*
@@ -285,10 +317,6 @@ int rad_elem_can_split(const rad_hier *h, const rad_elem *e);
  * of memory.  Not thread-safe.
  */
 uint32_t rad_elem_split(rad_hier *h, uint32_t id);
-
-/* The geometry rad_elem_split gives quarter k of e (0..3), bit for bit. */
-void rad_elem_quarter(const rad_elem *e, int k, float p0[3], float e1[3],
-                      float e2[3]);
 
 /* Subdivide every polygon uniformly until edges are <= edge (matrix mesh). */
 rad_status rad_hier_mesh_uniform(rad_hier *h, double edge, rad_error *err);

@@ -10,7 +10,8 @@
  * What holds:
  *   - elements: each polygon root is element i with no parent; an
  *     element's four children name it as parent, its polygon, one level
- *     more, and together cover its area; the leaves counted are nleaves;
+ *     more, and its four quarters in path order; the leaves counted
+ *     are nleaves;
  *   - clusters: the children of a cluster name it as parent and split its
  *     range of order[] in two, in order, and its area;
  *   - links: every link on a node's list names that node as receiver, a
@@ -85,16 +86,15 @@ static int check_elem(checker *c, uint32_t id)
 	}
 	if ((uint64_t)e->child + 4 > h->elems.count)
 		return fail(c, "element's children outside the pool", id);
-	double area = 0;
 	for (uint32_t k = 0; k < 4; k++) {
 		const rad_elem *ch = rad_elem_at(h, e->child + k);
 		if (ch->parent != id || ch->poly != e->poly ||
 		    ch->level != e->level + 1)
 			return fail(c, "child element disowns its parent", id);
-		area += ch->area;
+		if (ch->level > RAD_ELEM_MAX_LEVEL ||
+		    ch->path != (e->path | k << (2 * e->level)))
+			return fail(c, "child element is not its quarter", id);
 	}
-	if (!near_area(area, e->area))
-		return fail(c, "children do not cover the element", id);
 	for (uint32_t k = 0; k < 4; k++)
 		if (check_elem(c, e->child + k) != 0)
 			return -1;
@@ -135,7 +135,8 @@ int rad_hier_check(const rad_hier *h, char *msg, size_t len)
 		return fail(&c, "fewer elements than polygons", npolys);
 	for (uint32_t i = 0; i < npolys; i++) {
 		const rad_elem *e = rad_elem_at(h, i);
-		if (e->parent != RAD_NONE || e->poly != i || e->level != 0)
+		if (e->parent != RAD_NONE || e->poly != i || e->level != 0 ||
+		    e->path != 0)
 			return fail(&c, "polygon root misplaced", i);
 		if (check_elem(&c, i) != 0)
 			return -1;

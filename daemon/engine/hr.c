@@ -214,11 +214,12 @@ static void update_leaf(rad_hier *h, rad_elem *e, const float *x, void *ud)
 			e->I[c] = x[1 + c] + (e->I[c] - x[1 + c]) / (rm * x[0]);
 	for (int c = 0; c < 3; c++)
 		nb[c] = m->emit[c] + m->rho[c] * e->I[c];
-	acc->change += e->area * fabs(rad_luma(nb) - rad_luma(e->B));
-	acc->total += e->area * rad_luma(nb);
+	acc->change +=
+	        rad_elem_area(h, e) * fabs(rad_luma(nb) - rad_luma(e->B));
+	acc->total += rad_elem_area(h, e) * rad_luma(nb);
 	for (int c = 0; c < 3; c++) { /* the change: tail, statistics */
 		e->dB[c] = nb[c] - e->B[c];
-		acc->chg[c] += e->area * fabs(e->dB[c]);
+		acc->chg[c] += rad_elem_area(h, e) * fabs(e->dB[c]);
 	}
 	memcpy(e->B, nb, sizeof(nb));
 }

@@ -31,7 +31,7 @@ static const rad_light *node_light(const rad_hier *h, uint32_t t)
 static void elem_patch(const rad_hier *h, uint32_t id, rad_patch *p)
 {
 	const rad_elem *e = rad_elem_at(h, id);
-	rad_patch_from_floats(p, e->p0, e->e1, e->e2, e->quad);
+	rad_elem_patch(h, e, p);
 }
 
 double node_luma_B(const rad_hier *h, uint32_t t)
@@ -71,7 +71,7 @@ double node_area_eff(const rad_hier *h, uint32_t t)
 {
 	if (node_is_cluster(t))
 		return rad_cluster_at(h, t)->area;
-	return rad_elem_at(h, t)->area;
+	return rad_elem_area(h, rad_elem_at(h, t));
 }
 
 /* Projected area of cluster t towards unit direction u. */
@@ -114,7 +114,7 @@ double node_size(const rad_hier *h, uint32_t t)
 		return cluster_diag(rad_cluster_at(h, t));
 	if (node_is_light(t))
 		return 0;
-	return rad_elem_edge(rad_elem_at(h, t));
+	return rad_elem_edge(h, rad_elem_at(h, t));
 }
 
 int node_children(rad_hier *h, uint32_t t, uint32_t out[4])
@@ -390,7 +390,7 @@ double node_energy_scale(const rad_hier *h, int delta, const double got[3],
 		const rad_elem *e = rad_elem_at(h, i); /* pulled: the mean */
 		const float *b = delta ? e->dB : e->B;
 		for (int c = 0; c < 3; c++)
-			sent[c] += (double)e->area * b[c];
+			sent[c] += (double)rad_elem_area(h, e) * b[c];
 	}
 	for (int c = 0; c < 3; c++) {
 		k[c] = got[c] > sent[c] && got[c] > 0 ? sent[c] / got[c] : 1;
@@ -440,7 +440,7 @@ double node_tail_add(rad_hier *h, const double q[3])
 	rad_hier_pull(h);
 	for (uint32_t i = 0; i < h->scene->npolys; i++) {
 		const rad_elem *e = rad_elem_at(h, i); /* pulled: the mean */
-		sum += e->area * rad_luma(e->B);
+		sum += rad_elem_area(h, e) * rad_luma(e->B);
 	}
 	return sum / h->scene->total_area;
 }
@@ -517,7 +517,7 @@ static double ff_iso(const rad_solver *sv, uint32_t rcv, uint32_t src,
 	int mr = node_points(h, rcv, sv->opt.rcv_samples, 0, x, nx, NULL);
 	int ms = node_points(h, src, sv->opt.vis_samples, 1, y, ny, rays);
 	int rsurf = !node_is_cluster(rcv), ssurf = !node_is_cluster(src);
-	double as = ssurf ? rad_elem_at(h, src)->area : 0;
+	double as = ssurf ? rad_elem_area(h, rad_elem_at(h, src)) : 0;
 	double rows[RAD_FF_MAX_SAMPLES];
 	int used = 0;
 	*spread = 0;
@@ -728,8 +728,9 @@ double node_ff_bound(const rad_hier *h, uint32_t rcv, uint32_t src)
 	if (node_is_light(src))
 		return light_ff_bound(h, rcv, src);
 	double d2 = node_gap2(h, rcv, src);
-	double as = node_is_cluster(src) ? rad_cluster_at(h, src)->area
-	                                 : rad_elem_at(h, src)->area;
+	double as = node_is_cluster(src)
+	                    ? rad_cluster_at(h, src)->area
+	                    : rad_elem_area(h, rad_elem_at(h, src));
 	double f = as / (M_PI * d2);
 	return d2 > 0 && f < 1 ? f : 1;
 }
@@ -769,7 +770,7 @@ double node_area(const rad_hier *h, uint32_t t)
 		return 0;
 	if (node_is_cluster(t))
 		return rad_cluster_at(h, t)->area;
-	return rad_elem_at(h, t)->area;
+	return rad_elem_area(h, rad_elem_at(h, t));
 }
 
 void node_stat_exchange(rad_solver *sv, uint32_t r, uint32_t s, double ff,

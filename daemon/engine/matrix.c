@@ -95,7 +95,7 @@ static double predicted_leaves(const rad_hier *h, double edge)
 {
 	double total = 0;
 	for (uint32_t i = 0; i < h->scene->npolys; i++) {
-		double len = rad_elem_edge(rad_elem_at(h, i)), leaves = 1;
+		double len = rad_elem_edge(h, rad_elem_at(h, i)), leaves = 1;
 		while (len > edge && len > h->min_edge && leaves < 1e12) {
 			len *= 0.5;
 			leaves *= 4;
@@ -268,8 +268,7 @@ static rad_status matrix_init(rad_solver *sv, rad_error *err)
 	} else {
 		for (uint32_t i = 0; i < n; i++) {
 			const rad_elem *e = rad_elem_at(&sv->h, m->leaf[i]);
-			rad_patch_from_floats(&patch[i], e->p0, e->e1, e->e2,
-			                      e->quad);
+			rad_elem_patch(&sv->h, e, &patch[i]);
 		}
 		st = build_matrix(sv, m, patch, count, err);
 	}
@@ -311,8 +310,8 @@ static void sweep(rad_solver *sv, matrix_impl *m, double *change, double *level)
 			e->B[k] = (float)B;
 			e->I[k] = (float)I;
 		}
-		*change += e->area * fabs(rad_luma(dB));
-		*level += e->area * rad_luma(Bf);
+		*change += rad_elem_area(h, e) * fabs(rad_luma(dB));
+		*level += rad_elem_area(h, e) * rad_luma(Bf);
 	}
 }
 

@@ -185,9 +185,9 @@ static rad_status prog_init(rad_solver *sv, rad_error *err)
 		const rad_material *m = rad_elem_mat(h, e);
 		for (int k = 0; k < 3; k++)
 			p->unshot[3 * i + k] = m->emit[k];
-		p->area += e->area;
-		rho += e->area * rad_luma(m->rho);
-		emitted += e->area * rad_luma(m->emit);
+		p->area += rad_elem_area(h, e);
+		rho += rad_elem_area(h, e) * rad_luma(m->rho);
+		emitted += rad_elem_area(h, e) * rad_luma(m->emit);
 	}
 	p->rho_mean = p->area > 0 ? rho / p->area : 0;
 	p->light_flux = fmax(0, sv->flux_scale - emitted);
@@ -208,7 +208,7 @@ static double would_shoot(const rad_solver *sv, const prog_impl *p, uint32_t i,
 	const rad_material *m = rad_elem_mat(&sv->h, e);
 	for (int k = 0; k < 3; k++)
 		dB[k] = p->unshot[3 * (size_t)i + k] + m->rho[k] * amb[k];
-	return fabs(rad_luma3(dB)) * e->area;
+	return fabs(rad_luma3(dB)) * rad_elem_area(&sv->h, e);
 }
 
 /* Cohen's ambient estimate: the radiosity all unshot energy will still
@@ -217,7 +217,8 @@ static void ambient(const rad_solver *sv, const prog_impl *p, double amb[3])
 {
 	double sum[3] = {0, 0, 0};
 	for (uint32_t i = 0; i < p->npatch; i++) {
-		double a = rad_elem_at(&sv->h, p->patch[i])->area;
+		double a =
+		        rad_elem_area(&sv->h, rad_elem_at(&sv->h, p->patch[i]));
 		for (int k = 0; k < 3; k++)
 			sum[k] += a * p->unshot[3 * i + k];
 	}
@@ -233,7 +234,7 @@ static void patch_source(const rad_solver *sv, const prog_impl *p, uint32_t i,
 	s->light = RAD_NONE;
 	s->patch = i;
 	s->poly = e->poly;
-	rad_patch_from_floats(&s->geom, e->p0, e->e1, e->e2, e->quad);
+	rad_elem_patch(&sv->h, e, &s->geom);
 	would_shoot(sv, p, i, amb, s->dB);
 	for (int k = 0; k < 3; k++)
 		s->keep[k] = p->unshot[3 * (size_t)i + k] - s->dB[k];
@@ -351,7 +352,7 @@ static void eval_past(const shot *sh, rcv_item *it, const rad_patch *r,
 		if (e->poly == poly || (S[0] == 0 && S[1] == 0 && S[2] == 0))
 			continue;
 		rad_patch g;
-		rad_patch_from_floats(&g, e->p0, e->e1, e->e2, e->quad);
+		rad_elem_patch(&sv->h, e, &g);
 		double f = rad_ff_patch(s->vis, r, &g, nrcv,
 		                        sv->opt.vis_samples, &it->rays);
 		for (int c = 0; c < 3; c++)
@@ -371,7 +372,7 @@ static void eval_item(const shot *sh, rcv_item *it)
 	const rad_elem *e = rad_elem_at(&sv->h, it->elem);
 	int nrcv = rcv_points(sv);
 	rad_patch r;
-	rad_patch_from_floats(&r, e->p0, e->e1, e->e2, e->quad);
+	rad_elem_patch(&sv->h, e, &r);
 	if (it->fresh)
 		eval_past(sh, it, &r, e->poly);
 	for (uint32_t i = 0; i < sh->nsrc; i++) {
@@ -432,7 +433,8 @@ static rad_status eval_first_round(rad_solver *sv, shot *sh, size_t n,
 static int wants_split(const rad_hier *h, const rcv_item *it, double limit)
 {
 	const rad_elem *e = rad_elem_at(h, it->elem);
-	return it->spread * e->area > limit && rad_elem_can_split(h, e);
+	return it->spread * rad_elem_area(h, e) > limit &&
+	       rad_elem_can_split(h, e);
 }
 
 /* A fresh leaf takes its gathered past; what it holds beyond its share
@@ -442,7 +444,9 @@ static void adopt_past(rad_solver *sv, prog_impl *p, const rcv_item *it)
 	rad_elem *e = rad_elem_at(&sv->h, it->elem);
 	const rad_elem *parent = rad_elem_at(&sv->h, e->parent);
 	const rad_material *m = rad_elem_mat(&sv->h, e);
-	double w = e->area / rad_elem_at(&sv->h, p->patch[it->patch])->area;
+	double w =
+	        rad_elem_area(&sv->h, e) /
+	        rad_elem_area(&sv->h, rad_elem_at(&sv->h, p->patch[it->patch]));
 	double *U = p->unshot + 3 * (size_t)it->patch;
 	for (int k = 0; k < 3; k++) {
 		U[k] += m->rho[k] * (it->past[k] - parent->I[k]) * w;
@@ -457,7 +461,9 @@ static void apply(rad_solver *sv, prog_impl *p, const rcv_item *it)
 {
 	rad_elem *e = rad_elem_at(&sv->h, it->elem);
 	const rad_material *m = rad_elem_mat(&sv->h, e);
-	double w = e->area / rad_elem_at(&sv->h, p->patch[it->patch])->area;
+	double w =
+	        rad_elem_area(&sv->h, e) /
+	        rad_elem_area(&sv->h, rad_elem_at(&sv->h, p->patch[it->patch]));
 	double *U = p->unshot + 3 * (size_t)it->patch;
 	for (int k = 0; k < 3; k++) {
 		double I = e->I[k] + it->dI[k];
@@ -465,7 +471,7 @@ static void apply(rad_solver *sv, prog_impl *p, const rcv_item *it)
 		e->B[k] = (float)(m->emit[k] + m->rho[k] * I);
 		U[k] += m->rho[k] * it->dI[k] * w;
 	}
-	p->flux_received += rad_luma3(it->dI) * e->area;
+	p->flux_received += rad_luma3(it->dI) * rad_elem_area(&sv->h, e);
 }
 
 /*

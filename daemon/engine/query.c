@@ -109,7 +109,7 @@ static double children_rf(const gather *g, const rad_elem *e, const float E[3])
 	for (uint32_t k = 0; k < 4; k++) {
 		const rad_elem *c = rad_elem_at(g->h, e->child + k);
 		rad_patch q;
-		rad_patch_from_floats(&q, c->p0, c->e1, c->e2, c->quad);
+		rad_elem_patch(g->h, c, &q);
 		rf += reflected(c, E) * rad_ff_point_patch(g->x, g->n, &q);
 	}
 	return rf;
@@ -233,7 +233,7 @@ static void gather_elem(gather *g, uint32_t id, const float E[3], double rp,
 	if (r <= NOISE_REL * rad_luma(E))
 		return;
 	rad_patch p;
-	rad_patch_from_floats(&p, e->p0, e->e1, e->e2, e->quad);
+	rad_elem_patch(g->h, e, &p);
 	/* The kernel is additive over a partition: F = 0 here means nothing
 	 * below is seen either. */
 	double F = rad_ff_point_patch(g->x, g->n, &p);
@@ -566,7 +566,7 @@ static void leaves_below(const rad_hier *h, uint32_t id, rad_leaf_fn fn,
 	rad_patch p;
 	v3 v[4];
 	double pos[4][3] = {{0}};
-	rad_patch_from_floats(&p, e->p0, e->e1, e->e2, e->quad);
+	rad_elem_patch(h, e, &p);
 	int nv = rad_patch_vertices(&p, v);
 	for (int k = 0; k < nv; k++) {
 		pos[k][0] = v[k].x;

@@ -71,7 +71,7 @@ static void node_power(const rad_hier *h, uint32_t id, double P[3])
 {
 	const rad_elem *e = rad_elem_at(h, id);
 	for (int c = 0; c < 3; c++)
-		P[c] += (double)e->area * e->I[c];
+		P[c] += (double)rad_elem_area(h, e) * e->I[c];
 	if (e->child != RAD_NONE)
 		for (uint32_t k = 0; k < 4; k++)
 			node_power(h, e->child + k, P);
@@ -144,15 +144,15 @@ static void update_leaf(rad_hier *h, rad_elem *e, const float *extra, void *ud)
 		                : (float)d;
 		e->dB[c] = (float)d;
 		e->B[c] += inc[c];
-		acc->chg[c] += e->area * fabs(d);
+		acc->chg[c] += rad_elem_area(h, e) * fabs(d);
 		/* Leaves report the total irradiance, not the increment
 		 * (a black leaf gathers nothing: it keeps the last one). */
 		if (m->rho[c] > 0)
 			e->I[c] = (e->B[c] - m->emit[c]) / m->rho[c];
 	}
-	acc->change += e->area * fabs(rad_luma(inc));
-	acc->shot += e->area * fabs(rad_luma(e->dB));
-	acc->total += e->area * rad_luma(e->B);
+	acc->change += rad_elem_area(h, e) * fabs(rad_luma(inc));
+	acc->shot += rad_elem_area(h, e) * fabs(rad_luma(e->dB));
+	acc->total += rad_elem_area(h, e) * rad_luma(e->B);
 }
 
 /*

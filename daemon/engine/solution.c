@@ -32,9 +32,10 @@
 
 #define SOL_MAGIC 0x534c5852u /* "RXLS" little-endian: "luxrad solution" */
 #define SOL_VERSION                                                            \
-	4u /* 2: clusters carry their orientation moments; 3:                  \
+	5u /* 2: clusters carry their orientation moments; 3:                  \
 	    * and where their irradiance came from; 4: elements their          \
-	    * exposed fraction (hier.h, Covered parts) */
+	    * exposed fraction (hier.h, Covered parts); 5: their path, not     \
+	    * their region (hier.h, Regions) */
 
 struct rad_solution {
 	const rad_scene *scene;
@@ -329,31 +330,26 @@ static int elem_ok(const rad_elem *e, uint32_t np, uint32_t ne)
 	    (e->child != RAD_NONE &&
 	     (e->child < np || e->child >= ne || ne - e->child < 4)))
 		return 0;
-	return finite3(e->p0) && finite3(e->e1) && finite3(e->e2) &&
-	       finite3(e->B) && finite3(e->I) && finite3(e->dB) &&
-	       isfinite(e->area) && e->area >= 0;
+	return finite3(e->B) && finite3(e->I) && finite3(e->dB);
 }
 
 /*
- * An element's shape is not data of its own: a root is its polygon, a
- * child the quarter rad_elem_split made, bit for bit.  Checked, so that
- * damage there (a degenerate edge, a far corner) is refused, not traced.
+ * An element's region is not data of its own (hier.h, Regions): a root is
+ * its polygon, a child the quarter its path names.  Level and path are
+ * checked, so that damage there (a path no split made, a depth past the
+ * cap) is refused, not traced.
  */
-static int root_matches(const rad_elem *e, const rad_poly *p)
+static int root_matches(const rad_elem *e)
 {
-	return !memcmp(e->p0, p->p0, sizeof e->p0) &&
-	       !memcmp(e->e1, p->e1, sizeof e->e1) &&
-	       !memcmp(e->e2, p->e2, sizeof e->e2) && e->quad == p->quad &&
-	       e->area == p->area;
+	return e->level == 0 && e->path == 0;
 }
 
-static int quarter_matches(const rad_elem *parent, int k, const rad_elem *e)
+static int quarter_matches(const rad_elem *parent, uint32_t k,
+                           const rad_elem *e)
 {
-	float p0[3], e1[3], e2[3];
-	rad_elem_quarter(parent, k, p0, e1, e2);
-	return !memcmp(e->p0, p0, sizeof p0) && !memcmp(e->e1, e1, sizeof e1) &&
-	       !memcmp(e->e2, e2, sizeof e2) && e->quad == parent->quad &&
-	       e->area == parent->area * 0.25f;
+	return e->level == parent->level + 1 &&
+	       e->level <= RAD_ELEM_MAX_LEVEL &&
+	       e->path == (parent->path | k << (2 * parent->level));
 }
 
 /* Every element reached once from the roots, children of one polygon. */
@@ -371,11 +367,10 @@ static rad_status check_elems(rad_solution *s, uint32_t np, uint32_t ne,
 			return rad_fail(err, RAD_ERR_INVALID,
 			                "solution: root %u names polygon %u", i,
 			                a[i].poly);
-		if (!root_matches(&a[i], &s->h.scene->polys[i]))
-			return rad_fail(err, RAD_ERR_INVALID,
-			                "solution: root %u is not polygon %u's "
-			                "shape",
-			                i, i);
+		if (!root_matches(&a[i]))
+			return rad_fail(
+			        err, RAD_ERR_INVALID,
+			        "solution: root %u has a level or a path", i);
 	}
 	/* Ids of children always exceed their parent's (breadth-first), so
 	 * one forward pass visits the forest. */
@@ -400,7 +395,7 @@ static rad_status check_elems(rad_solution *s, uint32_t np, uint32_t ne,
 				                "solution: element %u is "
 				                "shared or crosses polygons",
 				                c);
-			if (!quarter_matches(&a[i], (int)k, &a[c]))
+			if (!quarter_matches(&a[i], k, &a[c]))
 				return rad_fail(err, RAD_ERR_INVALID,
 				                "solution: element %u is not "
 				                "quarter %u of element %u",

@@ -214,6 +214,81 @@ static void expect_planted(rad_hier *h, uint32_t *field, const char *part)
 	*field ^= 1;
 }
 
+/*
+ * Elements hold no geometry (hier.h, Regions): each quarter's region is
+ * the one rad_region_quarter makes of its parent's, bit for bit, on a
+ * parallelogram and on a triangle (whose fourth quarter is turned over);
+ * areas and edges are the parent's over 4 and 2, exactly; and the depth
+ * stops at RAD_ELEM_MAX_LEVEL even with no smallest edge at all.
+ */
+static void test_elem_regions_derived(void **state)
+{
+	(void)state;
+	rad_scene *s = NULL;
+	rad_error err;
+	assert_int_equal(rad_scene_new(&s, &err), RAD_OK);
+	double rho[3] = {0.5, 0.5, 0.5}, zero[3] = {0, 0, 0};
+	uint32_t mat, node;
+	assert_int_equal(rad_scene_add_material(s, rho, zero, &mat, &err), 0);
+	assert_int_equal(rad_scene_add_node(s, "parts", &node, &err), 0);
+	/* A parallelogram (two triangles, merged) and a lone triangle. */
+	static const double t[9 * 3] = {
+	        0.1, 0, 0, 1.3, 0,   0.2, 1.7, 0.9, 0.4, /* quad, half 1 */
+	        0.1, 0, 0, 1.7, 0.9, 0.4, 0.5, 0.9, 0.2, /* quad, half 2 */
+	        3,   0, 0, 4.1, 0.3, 0,   3.2, 1.9, 0.7, /* triangle */
+	};
+	assert_int_equal(rad_scene_add_triangles(s, mat, node, t, 3, &err),
+	                 RAD_OK);
+	assert_int_equal(rad_scene_commit(s, &err), RAD_OK);
+	assert_int_equal(s->npolys, 2);
+	assert_int_not_equal(s->polys[0].quad, s->polys[1].quad);
+	rad_mem mem;
+	rad_mem_init(&mem);
+	rad_hier h;
+	assert_int_equal(rad_hier_init(&h, s, &mem, 0.0, &err), RAD_OK);
+	for (uint32_t root = 0; root < 2; root++) {
+		uint32_t id = root;
+		while (rad_elem_can_split(&h, rad_elem_at(&h, id))) {
+			uint32_t c = rad_elem_split(&h, id);
+			assert_int_not_equal(c, RAD_NONE);
+			const rad_elem *e = rad_elem_at(&h, id);
+			float p0[3], e1[3], e2[3];
+			rad_elem_region(&h, e, p0, e1, e2);
+			double sum = 0;
+			for (int k = 0; k < 4; k++) {
+				const rad_elem *ch =
+				        rad_elem_at(&h, c + (uint32_t)k);
+				float q0[3], q1[3], q2[3], r0[3], r1[3], r2[3];
+				memcpy(q0, p0, sizeof q0);
+				memcpy(q1, e1, sizeof q1);
+				memcpy(q2, e2, sizeof q2);
+				rad_region_quarter(q0, q1, q2,
+				                   rad_elem_quad(&h, e), k);
+				rad_elem_region(&h, ch, r0, r1, r2);
+				assert_memory_equal(q0, r0, sizeof q0);
+				assert_memory_equal(q1, r1, sizeof q1);
+				assert_memory_equal(q2, r2, sizeof q2);
+				assert_true(rad_elem_area(&h, ch) ==
+				            rad_elem_area(&h, e) / 4);
+				assert_true(rad_elem_edge(&h, ch) ==
+				            rad_elem_edge(&h, e) / 2);
+				sum += rad_elem_area(&h, ch);
+			}
+			assert_true(sum == rad_elem_area(&h, e));
+			/* Down a different quarter at each level. */
+			id = c + (uint32_t)(e->level % 4);
+		}
+		assert_int_equal(rad_elem_at(&h, id)->level,
+		                 RAD_ELEM_MAX_LEVEL);
+	}
+	char msg[256];
+	assert_int_equal(rad_hier_check(&h, msg, sizeof(msg)), 0);
+	rad_elem *deep = rad_elem_at(&h, rad_elem_at(&h, 0)->child + 2);
+	expect_planted(&h, &deep->path, "not its quarter");
+	rad_hier_destroy(&h);
+	rad_scene_free(s);
+}
+
 static void test_hier_invariants(void **state)
 {
 	(void)state;
@@ -503,6 +578,7 @@ int main(void)
 	        cmocka_unit_test(test_scene_and_solver_return_to_zero),
 	        cmocka_unit_test(test_solver_alloc_failure_is_clean),
 	        cmocka_unit_test(test_hier_invariants),
+	        cmocka_unit_test(test_elem_regions_derived),
 	        cmocka_unit_test(test_limit_refuses_cleanly),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
