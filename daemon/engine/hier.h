@@ -13,11 +13,12 @@
  *     RAD_CLUSTER_LEAF_MAX polygons, a contiguous range of order[].
  *     Every cluster covers a contiguous range of order[], so "the polygons
  *     in this cluster" is a range, never a list walk.
- *   - links (rad_link): receiver <- source transfers with their form factor,
- *     chained per receiver through `next`.  A link also has `child` and
- *     `nchild` so that a refined (passive) link can keep its children
- *     (consecutive records) for the link hierarchy of the reduced-memory
- *     solver; classic HR frees refined links instead.
+ *   - links (rad_link): receiver <- source transfers with their form factor.
+ *     Classic HR chains them per receiver through `next` and frees
+ *     refined links; the reduced-memory solver keeps a refined (passive)
+ *     link with its children (consecutive records: `child`, `nchild`) and
+ *     no lists per receiver.  Each uses one of the two, so they share
+ *     their word: a link is 24 bytes, not 28.
  *
  * Liveness: walk the trees (polygon roots 0 .. npolys-1, root cluster 0),
  * never a pool's id range: pools may hold records skipped so that sibling
@@ -185,16 +186,23 @@ enum {
 };
 
 typedef struct rad_link {
-	uint32_t rcv;    /* tagged receiver id */
-	uint32_t src;    /* tagged source id */
-	float ff;        /* F(rcv <- src), visibility included; for a light,
-	                    irradiance (lux) per unit of its intensity */
-	float spread;    /* max - min of ff over the receiver's points */
-	uint32_t next;   /* next link on the same receiver */
-	uint32_t child;  /* first child link (passive links), else RAD_NONE */
+	uint32_t rcv; /* tagged receiver id */
+	uint32_t src; /* tagged source id */
+	float ff;     /* F(rcv <- src), visibility included; for a light,
+	                 irradiance (lux) per unit of its intensity */
+	float spread; /* max - min of ff over the receiver's points */
+	union {
+		uint32_t next;  /* hr: next link on the same receiver */
+		uint32_t child; /* rmb: first child link (passive), or
+		                   RAD_NONE */
+	};
 	uint16_t nchild; /* number of consecutive children */
 	uint16_t flags;  /* RAD_LINK_* */
 } rad_link;
+
+/* Sizes the memory study measures by (Regions; links above). */
+_Static_assert(sizeof(rad_elem) == 60, "rad_elem grew");
+_Static_assert(sizeof(rad_link) == 24, "rad_link grew");
 
 typedef struct rad_hier {
 	const rad_scene *scene;

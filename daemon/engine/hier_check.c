@@ -14,9 +14,9 @@
  *     are nleaves;
  *   - clusters: the children of a cluster name it as parent and split its
  *     range of order[] in two, in order, and its area;
- *   - links: every link on a node's list names that node as receiver, a
- *     source inside its pool, and a passive link's children lie inside
- *     the link pool.
+ *   - links: every link on a node's list names that node as receiver and
+ *     a source inside its pool, and is active (lists are classic HR's,
+ *     which keeps no passive links).
  */
 #include <math.h>
 #include <stdio.h>
@@ -64,12 +64,8 @@ static int check_links(checker *c, uint32_t head, uint32_t tagged)
 		    : (k->src & RAD_TAG_LIGHT) ? src >= h->scene->nlights
 		                               : src >= h->elems.count)
 			return fail(c, "link source outside its pool", tagged);
-		if (k->child != RAD_NONE &&
-		    (uint64_t)k->child + k->nchild > h->links.count)
-			return fail(c,
-			            "passive link's children outside the "
-			            "pool",
-			            tagged);
+		if (k->flags & RAD_LINK_PASSIVE)
+			return fail(c, "passive link on a node's list", tagged);
 	}
 	return 0;
 }
