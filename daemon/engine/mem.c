@@ -26,6 +26,9 @@ void rad_mem_init(rad_mem *m)
 	atomic_init(&m->peak, 0);
 	atomic_init(&m->work, 0);
 	atomic_init(&m->peak_work, 0);
+	m->base = NULL;
+	atomic_init(&m->peak_joint, 0);
+	atomic_init(&m->peak_work_joint, 0);
 }
 
 void rad_mem_report_clear(rad_mem_report *r)
@@ -44,6 +47,21 @@ void rad_mem_report_add(const rad_mem *m, rad_mem_report *r)
 	r->total += total;
 	r->peak_total += atomic_load(&m->peak);
 	r->peak_work += atomic_load(&m->peak_work);
+}
+
+void rad_mem_report_joint(const rad_mem *m, rad_mem_report *r)
+{
+	rad_mem_report_clear(r);
+	rad_mem_report_add(m, r);
+	if (!m->base)
+		return;
+	rad_mem_report_add(m->base, r);
+	int64_t p = atomic_load(&m->peak_joint);
+	int64_t w = atomic_load(&m->peak_work_joint);
+	int64_t bp = atomic_load(&m->base->peak);
+	int64_t bw = atomic_load(&m->base->peak_work);
+	r->peak_total = p > bp ? p : bp;
+	r->peak_work = w > bw ? w : bw;
 }
 
 /* The process-wide limit (rad.h): every count adds to process_bytes. */
@@ -109,6 +127,13 @@ int rad_mem_over_limit(size_t size)
 	return 1;
 }
 
+static void raise_to(_Atomic int64_t *peak, int64_t t)
+{
+	int64_t p = atomic_load(peak);
+	while (t > p && !atomic_compare_exchange_weak(peak, &p, t))
+		;
+}
+
 void rad_mem_count(rad_mem *m, rad_mem_kind kind, int64_t delta)
 {
 	atomic_fetch_add_explicit(&process_bytes, delta, memory_order_relaxed);
@@ -118,15 +143,15 @@ void rad_mem_count(rad_mem *m, rad_mem_kind kind, int64_t delta)
 	}
 	atomic_fetch_add(&m->bytes[kind], delta);
 	int64_t t = atomic_fetch_add(&m->total, delta) + delta;
-	int64_t p = atomic_load(&m->peak);
-	while (t > p && !atomic_compare_exchange_weak(&m->peak, &p, t))
-		;
+	raise_to(&m->peak, t);
+	if (m->base)
+		raise_to(&m->peak_joint, t + atomic_load(&m->base->total));
 	if (kind == RAD_MEM_STUDY)
 		return;
 	t = atomic_fetch_add(&m->work, delta) + delta;
-	p = atomic_load(&m->peak_work);
-	while (t > p && !atomic_compare_exchange_weak(&m->peak_work, &p, t))
-		;
+	raise_to(&m->peak_work, t);
+	if (m->base)
+		raise_to(&m->peak_work_joint, t + atomic_load(&m->base->work));
 }
 
 static _Atomic int64_t fail_countdown = -1; /* < 0: injection off */

@@ -34,6 +34,10 @@ typedef struct rad_mem {
 	_Atomic int64_t peak;                  /* high-water mark of total */
 	_Atomic int64_t work;                  /* total minus RAD_MEM_STUDY */
 	_Atomic int64_t peak_work;             /* its high-water mark */
+	/* What this set is used with (a solver's scene), or NULL: the
+	 * high-water marks of total and work plus the base's at the time. */
+	const struct rad_mem *base;
+	_Atomic int64_t peak_joint, peak_work_joint;
 } rad_mem;
 
 /*
@@ -46,6 +50,13 @@ void rad_mem_inject_failure(int64_t n);
 void rad_mem_init(rad_mem *m);
 /* Add what m holds now into r (r is not cleared first). */
 void rad_mem_report_add(const rad_mem *m, rad_mem_report *r);
+/*
+ * r = what m and its base hold now, with their joint peaks: the larger of
+ * the base's own peak and m's joint one.  A sum of the two peaks would
+ * count the scene's build (Embree's temporary memory) as if it were held
+ * during the solve, which it never is.
+ */
+void rad_mem_report_joint(const rad_mem *m, rad_mem_report *r);
 void rad_mem_report_clear(rad_mem_report *r);
 
 /* 1 if allocating size more bytes would pass the process-wide limit

@@ -53,6 +53,7 @@ rad_status rad_solver_new(const rad_scene *scene, const rad_options *opt,
 	sv->opt = *opt;
 	sv->ops = solver_table[opt->solver];
 	rad_mem_init(&sv->mem);
+	sv->mem.base = &scene->mem;
 	double flux = RAD_LUMA_R * scene->total_flux[0] +
 	              RAD_LUMA_G * scene->total_flux[1] +
 	              RAD_LUMA_B * scene->total_flux[2];
@@ -146,9 +147,7 @@ void rad_solver_stats(const rad_solver *sv, rad_stats *out)
 	out->elements = rad_pool_live(&sv->h.elems);
 	out->clusters = rad_pool_live(&sv->h.clusters);
 	out->leaves = sv->h.nleaves;
-	rad_mem_report_clear(&out->mem);
-	rad_mem_report_add(&sv->mem, &out->mem);
-	rad_mem_report_add(&sv->scene->mem, &out->mem);
+	rad_mem_report_joint(&sv->mem, &out->mem);
 }
 
 void rad_solver_memory(const rad_solver *sv, rad_mem_report *out)

@@ -61,6 +61,53 @@ static void test_counts_match_allocator(void **state)
 	assert_true(r.peak_total >= 100000);
 }
 
+/* A solver's peak is the high-water mark of what it and its scene held
+ * together, not the sum of their peaks: a scene's build (Embree's
+ * temporary memory) is over before its solvers start. */
+static void test_joint_peak_with_base(void **state)
+{
+	(void)state;
+	rad_mem scene, solver;
+	rad_mem_init(&scene);
+	rad_mem_init(&solver);
+	solver.base = &scene;
+	void *kept = rad_mem_alloc(&scene, RAD_MEM_GEOMETRY, 100000);
+	void *build = rad_mem_alloc(&scene, RAD_MEM_BVH, 300000);
+	assert_non_null(kept);
+	assert_non_null(build);
+	rad_mem_free(&scene, RAD_MEM_BVH, build);
+	void *a = rad_mem_alloc(&solver, RAD_MEM_LINKS, 150000);
+	void *b = rad_mem_alloc(&solver, RAD_MEM_STUDY, 50000);
+	assert_non_null(a);
+	assert_non_null(b);
+	rad_mem_report r;
+	rad_mem_report_joint(&solver, &r);
+	rad_mem_report alone;
+	rad_mem_report_clear(&alone);
+	rad_mem_report_add(&scene, &alone);
+	int64_t scene_peak = alone.peak_total, kept_b = alone.total;
+	rad_mem_report_clear(&alone);
+	rad_mem_report_add(&solver, &alone);
+	assert_int_equal(r.total, kept_b + alone.total);
+	/* The build's peak is larger than anything held with the solver. */
+	assert_int_equal(r.peak_total, scene_peak);
+	assert_true(r.peak_total < scene_peak + alone.peak_total);
+	/* Without the study: the scene's peak still rules. */
+	assert_int_equal(r.peak_work, scene_peak);
+	/* Now the solver outgrows the build. */
+	void *c = rad_mem_alloc(&solver, RAD_MEM_LINKS, 400000);
+	assert_non_null(c);
+	rad_mem_report_joint(&solver, &r);
+	assert_int_equal(r.peak_total, r.total);
+	assert_int_equal(r.peak_work, r.total - r.bytes[RAD_MEM_STUDY]);
+	rad_mem_free(&solver, RAD_MEM_LINKS, a);
+	rad_mem_free(&solver, RAD_MEM_STUDY, b);
+	rad_mem_free(&solver, RAD_MEM_LINKS, c);
+	rad_mem_free(&scene, RAD_MEM_GEOMETRY, kept);
+	rad_mem_report_joint(&solver, &r);
+	assert_int_equal(r.total, 0);
+}
+
 static void test_pool_records_stay_put(void **state)
 {
 	(void)state;
@@ -573,6 +620,7 @@ int main(void)
 	        /* First: it forks, before any thread (Embree's) exists. */
 	        cmocka_unit_test(test_limit_shared_between_processes),
 	        cmocka_unit_test(test_counts_match_allocator),
+	        cmocka_unit_test(test_joint_peak_with_base),
 	        cmocka_unit_test(test_pool_records_stay_put),
 	        cmocka_unit_test(test_injected_failure_counts_nothing),
 	        cmocka_unit_test(test_scene_and_solver_return_to_zero),

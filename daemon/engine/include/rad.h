@@ -102,9 +102,10 @@ typedef enum rad_mem_kind {
 typedef struct rad_mem_report {
 	int64_t bytes[RAD_MEM_NKINDS]; /* current bytes by kind */
 	int64_t total;                 /* sum of bytes[] */
-	int64_t peak_total;            /* high-water mark of total */
-	int64_t peak_work; /* high-water mark of total minus study: what a
-	                      solve without study statistics needs */
+	int64_t peak_total; /* high-water mark of total (a solver's stats:
+	                       of the solver and its scene together) */
+	int64_t peak_work;  /* high-water mark of total minus study: what a
+	                       solve without study statistics needs */
 } rad_mem_report;
 
 /* JSON-friendly name of a kind ("geometry", "links"...). */
