@@ -313,6 +313,7 @@ static rad_status hr_init(rad_solver *sv, rad_error *err)
 			rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, st);
 		return rad_fail(err, RAD_ERR_NOMEM, "hr: out of memory");
 	}
+	st->wave.link_cost = sizeof(rad_link);
 	sv->impl = st;
 	return RAD_OK;
 }
@@ -337,11 +338,24 @@ static rad_status gather_cancelled(rad_error *err)
 	                "solution is the last iteration's");
 }
 
+/* What the gather allocates after the refinement (gather_bounded, and
+ * the push's payload, which a later step may need: st->clip), for
+ * elements up to twice as many as now: the room a memory budget keeps
+ * free (wave_room). */
+static size_t gather_reserve(const rad_solver *sv)
+{
+	size_t n = (size_t)sv->scene->npolys * 3 + 1;
+	return n * sizeof(double) + 64 +
+	       (2 * (size_t)sv->h.elems.count + sv->h.clusters.count) *
+	               RAD_PUSH_EXTRA * sizeof(float);
+}
+
 static rad_status hr_step(rad_solver *sv, rad_error *err)
 {
 	hr_state *st = sv->impl;
 	rad_hier *h = &sv->h;
 	wave_step_begin(sv, &st->wave);
+	st->wave.reserve = gather_reserve(sv);
 	rad_status rs = RAD_OK;
 	if (!st->started) {
 		rs = hr_initial_links(sv, st);

@@ -114,6 +114,40 @@ static rad_status store_link(rad_solver *sv, uint32_t r, uint32_t s, float ff,
 	return RAD_OK;
 }
 
+/* Hold pair r <- s to be split after the wave (expand_splits); under a
+ * memory budget, count what its children will take (wave_room). */
+static rad_status hold_pair(rad_solver *sv, hr_state *st, uint32_t r,
+                            uint32_t s, int rcv_only)
+{
+	if (sv->mem.budget)
+		st->wave.pending +=
+		        wave_split_bytes(&sv->h, &st->wave, r, s, rcv_only);
+	return push_pair(sv, &st->wave.held, r, s, (uint32_t)rcv_only);
+}
+
+/* 1 if the budget has room to split stored link r <- s (the re-test);
+ * else the budget is reached and the link stays, counted. */
+static int room_to_split(rad_solver *sv, hr_state *st, uint32_t r, uint32_t s,
+                         int rcv_only)
+{
+	rad_wave *w = &st->wave;
+	if (!sv->mem.budget)
+		return 1;
+	if (!w->at_budget) {
+		size_t kids = w->pending_kids;
+		size_t b = wave_split_bytes(&sv->h, w, r, s, rcv_only);
+		w->pending += b;
+		int room = wave_room(sv, w, 1, 0);
+		w->pending -= b;
+		w->pending_kids = kids;
+		if (room)
+			return 1;
+		w->at_budget = 1;
+	}
+	sv->stats.budget_held++;
+	return 0;
+}
+
 /* A candidate kept becomes a link; one refused waits to be split. */
 static rad_status apply(rad_solver *sv, const void *item, const wave_verdict *v)
 {
@@ -122,7 +156,7 @@ static rad_status apply(rad_solver *sv, const void *item, const wave_verdict *v)
 	if (v->action == WAVE_LEVEL)
 		return store_link(sv, p->rcv, p->src, v->ff, v->spread);
 	if (v->action == WAVE_SPLIT || v->action == WAVE_SPLIT_RCV)
-		return push_pair(sv, &st->wave.held, p->rcv, p->src,
+		return hold_pair(sv, st, p->rcv, p->src,
 		                 v->action == WAVE_SPLIT_RCV);
 	return RAD_OK;
 }
@@ -145,6 +179,7 @@ static rad_status expand_splits(rad_solver *sv, hr_state *st)
 		}
 	}
 	st->wave.held.n = 0;
+	st->wave.pending = st->wave.pending_kids = 0;
 	return RAD_OK;
 }
 
@@ -232,8 +267,7 @@ static rad_status requeue(rad_solver *sv, hr_state *st, uint32_t *prev,
 {
 	uint32_t id = *prev;
 	rad_link *l = rad_link_at(&sv->h, id);
-	rad_status rs = push_pair(sv, &st->wave.held, l->rcv, l->src,
-	                          (uint32_t)rcv_only);
+	rad_status rs = hold_pair(sv, st, l->rcv, l->src, rcv_only);
 	if (rs)
 		return rs;
 	*prev = l->next;
@@ -309,7 +343,8 @@ static rad_status retest_list(rad_solver *sv, hr_state *st, uint32_t *head,
 		 * judged on its bound: its sources may have lit up. */
 		double f = l->ff > 0 ? l->ff : node_ff_bound(h, l->rcv, l->src);
 		if (wave_refinable(h, l->rcv, l->src) &&
-		    oracle(sv, l->rcv, l->src, f) > sv->opt.eps) {
+		    oracle(sv, l->rcv, l->src, f) > sv->opt.eps &&
+		    room_to_split(sv, st, l->rcv, l->src, 0)) {
 			rad_status rs = requeue(sv, st, prev, 0);
 			if (rs)
 				return rs;
@@ -327,7 +362,8 @@ static rad_status retest_list(rad_solver *sv, hr_state *st, uint32_t *head,
 	for (uint32_t *prev = head; !rs && *prev != RAD_NONE;) {
 		rad_link *l = rad_link_at(h, *prev);
 		double v = link_error(h, l);
-		if (v >= cut && v > 0) {
+		if (v >= cut && v > 0 &&
+		    room_to_split(sv, st, l->rcv, l->src, 1)) {
 			total -= v;
 			rs = requeue(sv, st, prev, 1);
 		} else {

@@ -29,6 +29,28 @@ void rad_mem_init(rad_mem *m)
 	m->base = NULL;
 	atomic_init(&m->peak_joint, 0);
 	atomic_init(&m->peak_work_joint, 0);
+	m->budget = 0;
+	atomic_init(&m->budget_refusals, 0);
+}
+
+void rad_mem_set_budget(rad_mem *m, int64_t bytes)
+{
+	m->budget = bytes > 0 ? bytes : 0;
+}
+
+/* The most malloc_usable_size can give for a request of size (glibc: 16-
+ * byte steps, or whole pages once it maps the block). */
+static size_t usable_bound(size_t size)
+{
+	if (size >= 128 * 1024)
+		return (size + 4095) / 4096 * 4096;
+	return size + 24;
+}
+
+int rad_mem_room(const rad_mem *m, size_t bytes)
+{
+	return m->budget <= 0 ||
+	       atomic_load(&m->work) + (int64_t)bytes <= m->budget;
 }
 
 void rad_mem_report_clear(rad_mem_report *r)
@@ -161,21 +183,27 @@ void rad_mem_inject_failure(int64_t n)
 	atomic_store(&fail_countdown, n);
 }
 
-/* 1 if this allocation must fail: injected (rad_mem_inject_failure) or
- * refused by the process-wide limit. */
-static int must_fail(size_t size)
+/* 1 if an allocation of size bytes (at most grow bytes more held once
+ * made) must fail: injected (rad_mem_inject_failure), refused by the
+ * process-wide limit or by m's budget. */
+static int must_fail(rad_mem *m, rad_mem_kind kind, size_t size, size_t grow)
 {
 	int64_t n = atomic_load(&fail_countdown);
 	while (n > 0 &&
 	       !atomic_compare_exchange_weak(&fail_countdown, &n, n - 1))
 		;
-	return n == 0 || rad_mem_over_limit(size);
+	if (n == 0 || rad_mem_over_limit(size))
+		return 1;
+	if (kind != RAD_MEM_STUDY && grow > 0 && !rad_mem_room(m, grow)) {
+		atomic_fetch_add(&m->budget_refusals, 1);
+		return 1;
+	}
+	return 0;
 }
 
 void *rad_mem_alloc(rad_mem *m, rad_mem_kind kind, size_t size)
 {
-	(void)m;
-	if (must_fail(size))
+	if (must_fail(m, kind, size, usable_bound(size)))
 		return NULL;
 	void *p = malloc(size ? size : 1);
 	if (p)
@@ -187,8 +215,7 @@ void *rad_mem_calloc(rad_mem *m, rad_mem_kind kind, size_t n, size_t size)
 {
 	if (size && n > SIZE_MAX / size)
 		return NULL;
-	(void)m;
-	if (must_fail(n * size))
+	if (must_fail(m, kind, n * size, usable_bound(n * size)))
 		return NULL;
 	void *p = calloc(n ? n : 1, size ? size : 1);
 	if (p)
@@ -201,7 +228,10 @@ void *rad_mem_realloc(rad_mem *m, rad_mem_kind kind, void *p, size_t size)
 	if (!p)
 		return rad_mem_alloc(m, kind, size);
 	int64_t before = (int64_t)malloc_usable_size(p);
-	if (must_fail(size > (size_t)before ? size - (size_t)before : 0))
+	size_t most = usable_bound(size);
+	if (must_fail(m, kind,
+	              size > (size_t)before ? size - (size_t)before : 0,
+	              most > (size_t)before ? most - (size_t)before : 0))
 		return NULL;
 	void *q = realloc(p, size ? size : 1);
 	if (!q)

@@ -38,6 +38,10 @@ typedef struct rad_mem {
 	 * high-water marks of total and work plus the base's at the time. */
 	const struct rad_mem *base;
 	_Atomic int64_t peak_joint, peak_work_joint;
+	/* A budget over work (rad_mem_set_budget), 0 = none, and the
+	 * allocations it refused. */
+	int64_t budget;
+	_Atomic uint64_t budget_refusals;
 } rad_mem;
 
 /*
@@ -58,6 +62,17 @@ void rad_mem_report_add(const rad_mem *m, rad_mem_report *r);
  */
 void rad_mem_report_joint(const rad_mem *m, rad_mem_report *r);
 void rad_mem_report_clear(rad_mem_report *r);
+
+/*
+ * A hard budget for what m holds outside RAD_MEM_STUDY (its work): an
+ * allocation that would take work past it fails like any other, and is
+ * counted in m->budget_refusals.  0 removes it.  Solvers keep below it
+ * by asking rad_mem_room before they grow (hr.c, rmb.c: Budget).
+ */
+void rad_mem_set_budget(rad_mem *m, int64_t bytes);
+/* 1 if blocks of `bytes` in all (their allocator overhead included) fit
+ * in m's budget now; always 1 without a budget. */
+int rad_mem_room(const rad_mem *m, size_t bytes);
 
 /* 1 if allocating size more bytes would pass the process-wide limit
  * (rad_mem_set_limit); counts the refusal. */

@@ -252,6 +252,9 @@ static rad_status rmb_step(rad_solver *sv, rad_error *err)
 	rmb_state *st = sv->impl;
 	rad_hier *h = &sv->h;
 	wave_step_begin(sv, &st->wave);
+	/* Under a budget, room for the per-element arrays the walk grows
+	 * (err, emax, cut) to double once. */
+	st->wave.reserve = 6 * (size_t)h->elems.count * sizeof(float);
 	/* A first step cancelled between rows resumes its gather. */
 	if (st->iter > 0 || st->init_row == 0) {
 		zero_I(h, RAD_TAG_CLUSTER);

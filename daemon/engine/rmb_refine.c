@@ -322,6 +322,14 @@ static rad_status split_item(rad_solver *sv, const rmb_item *it, int rcv_only)
 	                l->flags & L_NEW ? node_ff_estimate(h, it->rcv, it->src)
 	                                 : l->ff))
 		keepable = 0;
+	/* The link cache (Budget): children the budget has no room to
+	 * keep are walked as transient pairs, made again when needed. */
+	const rmb_state *st = sv->impl;
+	if (keepable &&
+	    !wave_room_for(sv, &st->wave, (size_t)n * sizeof(rad_link))) {
+		keepable = 0;
+		sv->stats.budget_transient += (uint64_t)n;
+	}
 	if (keepable) {
 		uint32_t run = rad_pool_add(&h->links, (uint32_t)n);
 		if (run == RAD_NONE)

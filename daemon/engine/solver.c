@@ -54,6 +54,7 @@ rad_status rad_solver_new(const rad_scene *scene, const rad_options *opt,
 	sv->ops = solver_table[opt->solver];
 	rad_mem_init(&sv->mem);
 	sv->mem.base = &scene->mem;
+	rad_mem_set_budget(&sv->mem, (int64_t)(opt->memory_budget * 1048576.0));
 	double flux = RAD_LUMA_R * scene->total_flux[0] +
 	              RAD_LUMA_G * scene->total_flux[1] +
 	              RAD_LUMA_B * scene->total_flux[2];
@@ -65,6 +66,13 @@ rad_status rad_solver_new(const rad_scene *scene, const rad_options *opt,
 		                   opt->min_edge_rel * scene->diag, err);
 	if (!st)
 		st = sv->ops->init(sv, err);
+	if (st == RAD_ERR_NOMEM && atomic_load(&sv->mem.budget_refusals))
+		rad_fail(err, st,
+		         "%s: the memory budget (%g MiB) is smaller than this "
+		         "scene's element and cluster hierarchy (%u polygons: "
+		         "%.1f MiB for their root elements alone)",
+		         sv->ops->name, opt->memory_budget, scene->npolys,
+		         (double)scene->npolys * sizeof(rad_elem) / 1048576.0);
 	if (st) {
 		rad_solver_free(sv);
 		return st;
@@ -90,6 +98,7 @@ rad_status rad_solver_step(rad_solver *sv, rad_error *err)
 	sv->stats.links_created = sv->stats.links_deleted = 0;
 	sv->stats.links_recreated = sv->stats.links_gathered = 0;
 	sv->stats.links_transient = sv->stats.links_useful = 0;
+	sv->stats.budget_held = sv->stats.budget_transient = 0;
 	memset(sv->stats.energy_hist, 0, sizeof(sv->stats.energy_hist));
 	sv->stats.rays = 0;
 	rad_status st = sv->ops->step(sv, err);

@@ -63,6 +63,8 @@ void wave_step_begin(rad_solver *sv, rad_wave *w)
 	int threads = rad_par_threads(sv->par);
 	memset(w->rays, 0, (size_t)threads * sizeof(uint64_t));
 	w->force_store = 0;
+	w->at_budget = 0;
+	w->pending = w->pending_kids = 0;
 }
 
 static void list_free(rad_solver *sv, wave_list *l)
@@ -114,6 +116,27 @@ typedef struct judge_job {
 	wave_judge_fn judge;
 } judge_job;
 
+static int split_side(const rad_hier *h, uint32_t r, uint32_t s, int rcv_only);
+
+/* 1 if splitting the pair item starts with makes no element and no link
+ * record: rmb (whose children may stay transient) over elements already
+ * split.  Items start with (receiver, source), as hr's and rmb's do. */
+static int free_split(const rad_solver *sv, const rad_wave *w,
+                      const unsigned char *item, int rcv_only)
+{
+	if (w->link_cost)
+		return 0;
+	uint32_t rs[2];
+	memcpy(rs, item, sizeof(rs));
+	const rad_hier *h = &sv->h;
+	int side = split_side(h, rs[0], rs[1], rcv_only);
+	for (int k = 0; k < 2; k++)
+		if ((side & (1 << k)) && !node_is_cluster(rs[k]) &&
+		    rad_elem_at(h, rs[k])->child == RAD_NONE)
+			return 0;
+	return 1;
+}
+
 static void judge_range(void *ud, size_t b, size_t e, int thread)
 {
 	const judge_job *j = ud;
@@ -121,31 +144,62 @@ static void judge_range(void *ud, size_t b, size_t e, int thread)
 	int may_split = !w->force_store;
 	for (size_t i = b; i < e; i++) {
 		wave_verdict *v = &w->verdict[i];
+		const unsigned char *item = j->items + i * w->item_size;
 		v->ff = v->spread = 0;
-		v->action = j->judge(j->sv, j->items + i * w->item_size,
-		                     may_split, v, &w->rays[thread]);
+		v->held = 0;
+		v->action =
+		        j->judge(j->sv, item, may_split, v, &w->rays[thread]);
+		/* At the budget a pair to split stays at its level, unless
+		 * it cannot (a cluster's self-link always opens up) or its
+		 * split costs nothing that lasts (rmb, elements there). */
+		if (w->at_budget && may_split &&
+		    (v->action == WAVE_SPLIT || v->action == WAVE_SPLIT_RCV) &&
+		    !free_split(j->sv, w, item, v->action == WAVE_SPLIT_RCV)) {
+			v->ff = v->spread = 0;
+			v->action =
+			        j->judge(j->sv, item, 0, v, &w->rays[thread]);
+			v->held = v->action != WAVE_SPLIT;
+		}
 	}
+}
+
+/* Under a budget, blocks whose worst case (wave_room) is at most a
+ * 64th of the budget: a small budget is not spent on one block's
+ * reserve. */
+static size_t budget_block(const rad_solver *sv, const rad_wave *w)
+{
+	size_t pair = WAVE_KIDS * (2 * (size_t)w->item_size + w->link_cost) +
+	              4 * sizeof(rad_elem);
+	size_t m = (size_t)sv->mem.budget / 64 / pair;
+	return m < 64 ? 64 : m > WAVE_DEFER_BLOCK ? WAVE_DEFER_BLOCK : m;
 }
 
 rad_status wave_run(rad_solver *sv, rad_wave *w, const void *items, size_t n,
                     wave_judge_fn judge, wave_apply_fn apply)
 {
-	if (n > w->verdict_cap) {
-		wave_verdict *v = rad_mem_realloc(&sv->mem, RAD_MEM_SCRATCH,
-		                                  w->verdict, n * sizeof(*v));
+	/* One block, or blocks of WAVE_DEFER_BLOCK when deferrable or
+	 * under a budget: a judge only reads the hierarchy, which apply
+	 * does not change in a way it reads (links are stored, pairs
+	 * held), so the verdicts and the order they are applied in are
+	 * the same either way.  Verdicts are held for one block. */
+	size_t block = w->defer || sv->mem.budget ? WAVE_DEFER_BLOCK : n;
+	if (sv->mem.budget)
+		block = budget_block(sv, w);
+	size_t held = n < block ? n : block;
+	if (held > w->verdict_cap) {
+		wave_verdict *v =
+		        rad_mem_realloc(&sv->mem, RAD_MEM_SCRATCH, w->verdict,
+		                        held * sizeof(*v));
 		if (!v)
 			return RAD_ERR_NOMEM;
 		w->verdict = v;
-		w->verdict_cap = n;
+		w->verdict_cap = held;
 	}
-	/* One block, or blocks of WAVE_DEFER_BLOCK when deferrable: a
-	 * judge only reads the hierarchy, which apply does not change in
-	 * a way it reads (links are stored, pairs held), so the verdicts
-	 * and the order they are applied in are the same either way. */
-	size_t block = w->defer ? WAVE_DEFER_BLOCK : n;
 	w->judged = 0;
 	for (size_t off = 0; off < n; off += block) {
 		size_t m = n - off < block ? n - off : block;
+		if (!w->at_budget && !wave_room(sv, w, m, n - off - m))
+			w->at_budget = 1;
 		judge_job job = {sv, w,
 		                 (const unsigned char *)items +
 		                         off * w->item_size,
@@ -156,6 +210,7 @@ rad_status wave_run(rad_solver *sv, rad_wave *w, const void *items, size_t n,
 			                      &w->verdict[i]);
 			if (rs)
 				return rs;
+			sv->stats.budget_held += w->verdict[i].held;
 		}
 		w->judged = off + m;
 		if (w->defer && w->judged < n && rad_solver_cancelled(sv))
@@ -232,8 +287,78 @@ int wave_children(rad_hier *h, uint32_t r, uint32_t s, int rcv_only,
 	return n;
 }
 
+/* Bytes list l grows by (rad_mem_grow doubles it) to take `extra` more
+ * items of `item` bytes; 0 while its capacity holds them. */
+static size_t list_growth(const wave_list *l, size_t extra, size_t item)
+{
+	if (l->n + extra <= l->cap)
+		return 0;
+	size_t c = l->cap ? l->cap : 1024;
+	while (c < l->n + extra)
+		c *= 2;
+	return (c - l->cap) * item;
+}
+
+int wave_room(const rad_solver *sv, const rad_wave *w, size_t n, size_t rest)
+{
+	if (!sv->mem.budget)
+		return 1;
+	/* Each of the n pairs to judge may be held and split, at worst
+	 * into WAVE_KIDS children pairs (list items, links) with an element
+	 * split; each of the rest judged after them may become a link; the
+	 * pairs applied already take w->pending (and pending_kids items). */
+	size_t item = w->item_size;
+	size_t kids = n * WAVE_KIDS + w->pending_kids;
+	size_t bytes = list_growth(&w->todo, kids, item) +
+	               list_growth(&w->held, n, item) +
+	               n * (WAVE_KIDS * w->link_cost + 4 * sizeof(rad_elem)) +
+	               rest * w->link_cost + w->pending;
+	return wave_room_for(sv, w, bytes);
+}
+
+int wave_room_for(const rad_solver *sv, const rad_wave *w, size_t bytes)
+{
+	if (!sv->mem.budget)
+		return 1;
+	const rad_hier *h = &sv->h;
+	size_t blocks = ((size_t)h->elems.rec_size << h->elems.shift) +
+	                ((size_t)h->links.rec_size << h->links.shift);
+	return rad_mem_room(&sv->mem, blocks + w->reserve + bytes);
+}
+
+/* Children of node t a split makes, and whether an element is split. */
+static int child_count(const rad_hier *h, uint32_t t, int *splits)
+{
+	if (node_is_cluster(t)) {
+		const rad_cluster *c = rad_cluster_at(h, t);
+		return c->child != RAD_NONE ? 2 : (int)c->count;
+	}
+	*splits += rad_elem_at(h, t)->child == RAD_NONE;
+	return 4;
+}
+
+size_t wave_split_bytes(const rad_hier *h, rad_wave *w, uint32_t r, uint32_t s,
+                        int rcv_only)
+{
+	int side = split_side(h, r, s, rcv_only), splits = 0;
+	int nr = side & 1 ? child_count(h, r, &splits) : 1;
+	int ns = side == 3 ? nr : side & 2 ? child_count(h, s, &splits) : 1;
+	w->pending_kids += (size_t)(nr * ns);
+	return (size_t)(nr * ns) * w->link_cost +
+	       (size_t)splits * 4 * sizeof(rad_elem);
+}
+
 rad_status wave_failed(const rad_solver *sv, rad_status rs, rad_error *err)
 {
+	if (sv->mem.budget && atomic_load(&sv->mem.budget_refusals))
+		return rad_fail(err, rs,
+		                "%s: the memory budget (%g MiB) is too small "
+		                "for this scene's coarsest links (%u elements, "
+		                "%u links held)",
+		                sv->ops->name,
+		                (double)sv->mem.budget / 1048576.0,
+		                rad_pool_live(&sv->h.elems),
+		                rad_pool_live(&sv->h.links));
 	return rad_fail(err, rs,
 	                "%s: refinement ran out of memory (%u elements, %u "
 	                "links)",
@@ -244,6 +369,7 @@ rad_status wave_failed(const rad_solver *sv, rad_status rs, rad_error *err)
 rad_status wave_step_end(rad_solver *sv, const rad_wave *w, rad_error *err)
 {
 	int threads = rad_par_threads(sv->par);
+	sv->stats.budget_reached = w->at_budget;
 	for (int t = 0; t < threads; t++)
 		sv->stats.rays += w->rays[t];
 	rad_solver_progress(sv, 1.0);

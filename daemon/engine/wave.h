@@ -20,6 +20,7 @@ enum {
 typedef struct wave_verdict {
 	float ff, spread; /* WAVE_LEVEL: form factor, spread (else zero) */
 	uint8_t action;   /* WAVE_* */
+	uint8_t held;     /* 1: at its level because of the memory budget */
 } wave_verdict;
 
 /* A growable array of a solver's items (its pairs), SCRATCH; the size of
@@ -35,9 +36,18 @@ typedef struct rad_wave {
 	                          rmb: the wave taken off the top of todo */
 	wave_verdict *verdict; /* one per item of the wave run, SCRATCH */
 	size_t verdict_cap;
-	uint64_t *rays;     /* per-thread ray counters, SCRATCH */
-	uint32_t item_size; /* bytes per item */
-	int force_store;    /* cancelled: pairs stay at the level reached */
+	uint64_t *rays;      /* per-thread ray counters, SCRATCH */
+	uint32_t item_size;  /* bytes per item */
+	int force_store;     /* cancelled: pairs stay at the level reached */
+	int at_budget;       /* the memory budget is reached: pairs stay at
+	                        their level (wave_room) */
+	size_t reserve;      /* bytes the solver needs after its refinement
+	                        (its gather), set before each step */
+	size_t pending;      /* bytes the items applied so far will still
+	                        take (hr: children of the pairs held) */
+	size_t pending_kids; /* and the children pairs they will list */
+	size_t link_cost;    /* bytes a pair at its level takes: hr a link;
+	                        rmb nothing, its records being optional */
 	int defer;     /* set by the caller: a cancel within a wave stops it
 	                  after the block under way (WAVE_DEFER_BLOCK), the
 	                  items not judged left for the caller to keep */
@@ -89,7 +99,10 @@ rad_status wave_take_top(rad_solver *sv, rad_wave *w, size_t n);
 /*
  * Run one wave: judge items[0 .. n) in parallel, then apply the verdicts
  * in order (stopping at the first failure); once the caller has
- * cancelled, later waves keep their pairs at their level.
+ * cancelled, later waves keep their pairs at their level.  Under a memory
+ * budget the wave runs in blocks of WAVE_DEFER_BLOCK, and once a block
+ * might not fit (wave_room) it and every later one keep their pairs at
+ * their level (w->at_budget).
  */
 rad_status wave_run(rad_solver *sv, rad_wave *w, const void *items, size_t n,
                     wave_judge_fn judge, wave_apply_fn apply);
@@ -119,6 +132,23 @@ uint8_t wave_at_level(const rad_solver *sv, uint32_t r, uint32_t s, double b,
 #define WAVE_KIDS (RAD_CLUSTER_LEAF_MAX * RAD_CLUSTER_LEAF_MAX)
 int wave_children(rad_hier *h, uint32_t r, uint32_t s, int rcv_only,
                   uint32_t kr[WAVE_KIDS], uint32_t ks[WAVE_KIDS], int *side);
+
+/*
+ * 1 if refining n more items (each split, at worst, into WAVE_KIDS
+ * children pairs: list items, new elements and links), then storing the
+ * `rest` of the wave as links, still fits (wave_room_for).  When it is 0 the
+ * wave keeps its pairs at their level: w->at_budget, counted in
+ * stats.budget_held.
+ */
+int wave_room(const rad_solver *sv, const rad_wave *w, size_t n, size_t rest);
+/* 1 if `bytes` more still leave a block for each pool and w->reserve
+ * free under the solver's memory budget (always 1 without one). */
+int wave_room_for(const rad_solver *sv, const rad_wave *w, size_t bytes);
+/* Bytes that making the children pairs of a pair to refine (as
+ * wave_children would: element splits) and storing each at its level
+ * takes at most; adds the children to w->pending_kids. */
+size_t wave_split_bytes(const rad_hier *h, rad_wave *w, uint32_t r, uint32_t s,
+                        int rcv_only);
 
 /* A refinement's failure (out of memory), reported with the pool sizes. */
 rad_status wave_failed(const rad_solver *sv, rad_status rs, rad_error *err);

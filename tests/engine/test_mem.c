@@ -543,6 +543,98 @@ static void test_limit_refuses_cleanly(void **state)
 	assert_int_equal(rad_mem_process_bytes(), base);
 }
 
+/* Floor illuminance at two points, one in a corner. */
+static double floor_lux(const rad_solver *sv)
+{
+	const double pts[12] = {0.5,  1e-3, 0.5,  0, 1, 0,
+	                        0.04, 1e-3, 0.04, 0, 1, 0};
+	double lux[2];
+	rad_error err;
+	assert_int_equal(rad_solver_illuminance(sv, pts, 2, lux, &err), RAD_OK);
+	return lux[0] + lux[1];
+}
+
+/*
+ * A memory budget (rad_options.memory_budget): hr and rmb solve under
+ * 60 % of the memory they take without one, hold no more than it, and
+ * say that it stopped their refinement; their lux stays near the
+ * unbudgeted one.  A budget smaller than the hierarchy itself is refused
+ * at once, with a message that names it.
+ */
+static void test_budget_holds(void **state)
+{
+	(void)state;
+	rad_scene *s = NULL;
+	rad_error err;
+	assert_int_equal(build_grid_room(12, &s, &err), RAD_OK);
+	rad_solver_kind kinds[2] = {RAD_SOLVER_HR, RAD_SOLVER_RMB};
+	for (int k = 0; k < 2; k++) {
+		rad_options o;
+		rad_options_default(&o);
+		o.threads = 1;
+		o.solver = kinds[k];
+		o.eps = 1e-5;
+		rad_solver *sv = NULL;
+		assert_int_equal(rad_solver_new(s, &o, &sv, &err), RAD_OK);
+		for (int i = 0; i < 3; i++)
+			assert_int_equal(rad_solver_step(sv, &err), RAD_OK);
+		rad_mem_report m;
+		rad_solver_memory(sv, &m);
+		int64_t free_peak = m.peak_work;
+		double lux0 = floor_lux(sv);
+		rad_solver_free(sv);
+
+		o.memory_budget = 0.6 * (double)free_peak / 1048576.0;
+		int64_t budget = (int64_t)(o.memory_budget * 1048576.0);
+		assert_int_equal(rad_solver_new(s, &o, &sv, &err), RAD_OK);
+		int reached = 0;
+		uint64_t held = 0;
+		for (int i = 0; i < 3; i++) {
+			assert_int_equal(rad_solver_step(sv, &err), RAD_OK);
+			rad_stats st;
+			rad_solver_stats(sv, &st);
+			reached |= st.budget_reached;
+			held += st.budget_held + st.budget_transient;
+		}
+		rad_solver_memory(sv, &m);
+		double lux = floor_lux(sv);
+		print_message("%s: %.2f of %.2f MiB at most, peak %.2f MiB; "
+		              "floor %.1f lx, %.1f without a budget; %llu "
+		              "pairs held\n",
+		              k ? "rmb" : "hr", o.memory_budget,
+		              (double)free_peak / 1048576.0,
+		              (double)m.peak_work / 1048576.0, lux, lux0,
+		              (unsigned long long)held);
+		assert_true(m.peak_work <= budget);
+		assert_true(reached);
+		assert_true(held > 0);
+		assert_true(fabs(lux - lux0) < 0.25 * lux0);
+		rad_solver_free(sv);
+
+		/* Too small for the elements and clusters themselves. */
+		o.memory_budget = 0.01;
+		assert_int_equal(rad_solver_new(s, &o, &sv, &err),
+		                 RAD_ERR_NOMEM);
+		if (!strstr(err.msg, "memory budget"))
+			fail_msg("refused with '%s'", err.msg);
+	}
+	rad_scene_free(s);
+
+	/* The study's bookkeeping is not the solver's work. */
+	rad_mem m;
+	rad_mem_init(&m);
+	rad_mem_set_budget(&m, 4096);
+	void *a = rad_mem_alloc(&m, RAD_MEM_LINKS, 2048);
+	void *b = rad_mem_alloc(&m, RAD_MEM_LINKS, 4096);
+	void *c = rad_mem_alloc(&m, RAD_MEM_STUDY, 1 << 20);
+	assert_non_null(a);
+	assert_null(b);
+	assert_non_null(c);
+	assert_int_equal(atomic_load(&m.budget_refusals), 1);
+	rad_mem_free(&m, RAD_MEM_LINKS, a);
+	rad_mem_free(&m, RAD_MEM_STUDY, c);
+}
+
 /*
  * One limit over two processes: a child process shares a counter page
  * with its parent, builds a scene and dies without freeing it (as a
@@ -628,6 +720,7 @@ int main(void)
 	        cmocka_unit_test(test_hier_invariants),
 	        cmocka_unit_test(test_elem_regions_derived),
 	        cmocka_unit_test(test_limit_refuses_cleanly),
+	        cmocka_unit_test(test_budget_holds),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -467,7 +467,11 @@ typedef enum rad_store {
 	  "converged when the estimated relative error is at most this")       \
 	X(max_iterations, "max_iterations", "max-iterations", INT, 10000, 1,   \
 	  1e9, RAD_RANGE_CLOSED, RAD_NO_CHOICES, "N", "",                      \
-	  "iteration cap when converging")
+	  "iteration cap when converging") \
+	X(memory_budget, "memory_budget", "memory-budget", DOUBLE, 0, 0,       \
+	  HUGE_VAL, RAD_RANGE_HI_OPEN, RAD_NO_CHOICES, "MIB", "MiB",           \
+	  "the solver's memory, MiB; hr and rmb refine no further than it "   \
+	  "allows (0 = no budget)")
 /* clang-format on */
 
 typedef enum rad_opt_type {
@@ -623,6 +627,10 @@ typedef enum rad_stat_kind {
 	  "of gathered, by links never stored")                                \
 	X(links_useful, "links", "useful", U64, STEP, "",                      \
 	  "of gathered, those whose increment fails the oracle one level up")  \
+	X(budget_held, "links", "budget_held", U64, STEP, "",                  \
+	  "pairs kept at a coarser level by the memory budget")                \
+	X(budget_transient, "links", "budget_transient", U64, STEP, "",        \
+	  "rmb: links not kept for want of memory, made again when needed")    \
 	X(energy_hist, "", "energy_hist", HIST, STEP, "",                      \
 	  "exchanges by flux fraction: bin k counts [1e-(k+1), 1e-k)")         \
 	X(elements, "", "elements", U64, GAUGE, "", "surface elements")        \
@@ -637,6 +645,8 @@ typedef enum rad_stat_kind {
 	  "estimated remaining relative error")                                \
 	X(converged, "", "converged", BOOL, GAUGE, "",                         \
 	  "error_estimate is at most the tolerance")                           \
+	X(budget_reached, "", "budget_reached", BOOL, GAUGE, "",               \
+	  "the memory budget stopped refinement in the last iteration")        \
 	X(mem, "", "memory", MEM, GAUGE, "B", "solver and scene memory")
 /* clang-format on */
 
