@@ -9,7 +9,9 @@
  *    limit, its memory is given back, and another job solves meanwhile;
  *  - while the limit is reached (lowered by SIGHUP below what is held),
  *    new uploads, jobs and runs are refused with nomem, and accepted again
- *    once it is raised.
+ *    once it is raised;
+ *  - a job's memory budget (job_memory_budget, the option memory_budget)
+ *    holds its solver under it, and one below its hierarchy fails alone.
  * The scene is luxrad-scenegen's hall-full: 6 MB of geometry and BVH; hr
  * at eps 1e-5 grows to about 38 MB in a first iteration of a few
  * seconds.
@@ -170,6 +172,73 @@ static void test_a_job_over_the_limit_fails_alone(void **state)
 	dm_pass();
 }
 
+/*
+ * A job's memory budget: the daemon's job_memory_budget for the jobs that
+ * set none, the job option memory_budget for one that does.  The greedy
+ * job solves within 12 MiB (its solver's own bytes, the scene left out)
+ * and says the budget stopped it; a job whose budget is below what its
+ * hierarchy needs fails alone with nomem naming the budget.
+ */
+static void test_a_job_budget_holds(void **state)
+{
+	(void)state;
+	const char *args[] = {"--job-memory-budget", "12M", NULL};
+	dm_daemon *d = dm_start(args);
+	dm_conn *c = dm_open(d, NULL);
+	json_t *sc = NULL;
+	json_t *job = greedy_job(c, &sc);
+	json_decref(dm_ok(c, "{s:s, s:O, s:i}", "cmd", "job.run", "job", job,
+	                  "iterations", 2));
+	json_t *j = dm_wait_job(c, job, "paused|failed", 120000);
+	if (strcmp(json_string_value(dm_get(j, "state")), "paused") != 0)
+		fail_msg("a job under a 12 MiB budget ended %s: %s",
+		         json_string_value(dm_get(j, "state")),
+		         json_string_value(json_object_get(j, "error")));
+	json_decref(j);
+	json_t *r = dm_ok(c, "{s:s, s:O}", "cmd", "job.info", "job", job);
+	json_t *info = dm_get(r, "job");
+	json_t *st = dm_get(info, "stats");
+	json_t *m = dm_get(st, "memory");
+	json_t *k = dm_get(m, "by_kind");
+	long long scene = dm_int(k, "geometry") + dm_int(k, "materials") +
+	                  dm_int(k, "lights") + dm_int(k, "names") +
+	                  dm_int(k, "bvh");
+	long long solver = dm_int(m, "peak_work_bytes") - scene;
+	double budget = json_number_value(
+	        json_object_get(dm_get(info, "options"), "memory_budget"));
+	print_message("budget %.0f MiB: solver peak %.2f MiB, budget reached "
+	              "%d\n",
+	              budget, (double)solver / 1048576.0,
+	              json_is_true(json_object_get(st, "budget_reached")));
+	assert_true(budget == 12);
+	assert_true(solver <= 12ll << 20);
+	assert_true(json_is_true(json_object_get(st, "budget_reached")));
+	json_decref(r);
+
+	/* Its own budget, below its elements and clusters: nomem, alone. */
+	json_t *opt =
+	        json_pack("{s:i, s:f}", "threads", 1, "memory_budget", 0.05);
+	json_t *tiny = dm_job_create(c, sc, "hr", opt);
+	json_decref(opt);
+	json_decref(dm_ok(c, "{s:s, s:O, s:i}", "cmd", "job.run", "job", tiny,
+	                  "iterations", 1));
+	j = dm_wait_job(c, tiny, "failed|paused", 120000);
+	const char *why = json_string_value(json_object_get(j, "error"));
+	if (!why || !strstr(why, "memory budget"))
+		fail_msg("a job below its hierarchy's memory ended %s: %s",
+		         json_string_value(dm_get(j, "state")),
+		         why ? why : "(no error)");
+	print_message("the tiny job failed: %s\n", why);
+	json_decref(j);
+	json_decref(dm_ok(c, "{s:s, s:O, s:i}", "cmd", "job.run", "job", job,
+	                  "iterations", 1));
+	json_decref(dm_wait_job(c, job, "paused", 120000));
+	json_decref(tiny);
+	json_decref(job);
+	json_decref(sc);
+	dm_pass();
+}
+
 static void write_limit(const char *path, const char *limit)
 {
 	FILE *f = fopen(path, "w");
@@ -246,6 +315,7 @@ int main(void)
 	        T(test_an_upload_over_the_limit_is_nomem),
 	        T(test_a_job_over_the_limit_fails_alone),
 	        T(test_no_new_work_while_the_limit_is_reached),
+	        T(test_a_job_budget_holds),
 #undef T
 	};
 	const char *filter = getenv("LUXRAD_TEST_FILTER");

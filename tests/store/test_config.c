@@ -108,6 +108,7 @@ static void test_defaults_match_the_header(void **state)
 	assert_true(c.idle_timeout_s == 600);
 	assert_int_equal(c.max_output_bytes, 8u << 20);
 	assert_true(c.checkpoint_interval_s == 30);
+	assert_int_equal(c.job_memory_budget, 0);
 	char msg[512];
 	assert_int_equal(srv_config_check(&c, msg, sizeof(msg)), 0);
 }

@@ -147,6 +147,11 @@ static const cfg_key keys[] = {
          "engine memory of every scene, job and solution together; an "
          "allocation past it fails that upload or job with nomem; 0 = 3/4 "
          "of the machine's (or the cgroup's) memory"},
+        {"job_memory_budget", K_SIZE, F(job_memory_budget), 0,
+         (double)(1024 * TiB), "SIZE", "2G",
+         "memory budget of the jobs that set none (their option "
+         "memory_budget): a job's solver refines no further than it "
+         "allows; 0 = none"},
         {"max_output_bytes", K_SIZE, F(max_output_bytes), (double)KiB,
          (double)TiB, "SIZE", "64M",
          "send buffer per connection before events are dropped (1K..1T)"},
@@ -293,6 +298,7 @@ void srv_config_default(srv_config *c)
 	c->idle_timeout_s = 600;
 	c->max_output_bytes = 8 * MiB;
 	c->memory_limit = 0;
+	c->job_memory_budget = 0;
 	c->checkpoint_interval_s = 30;
 	mb_config_default(&c->modbus);
 }

@@ -70,19 +70,21 @@ typedef struct srv_config {
 	int max_connections;             /* default 64 */
 	int max_connections_per_address; /* TCP, per IPv4 address or IPv6
 	                                    /64; default 16; 0 = no limit */
-	double hello_timeout_s;  /* connect to hello; default 10; 0 = never */
-	double header_timeout_s; /* first byte of a header to its end;
-	                            default 30; 0 = never */
-	int max_scenes;          /* default 64 */
-	int max_jobs;            /* default 256 (all states) */
-	int max_subscriptions;   /* per connection; default 16 */
-	int max_points;          /* per query; default 1,000,000 */
-	double idle_timeout_s;   /* close connections silent this long;
-	                            default 600; 0 = never */
-	size_t max_output_bytes; /* per-connection send buffer before the
-	                            drop policy applies; default 8 MiB */
-	size_t memory_limit;     /* engine bytes, daemon-wide; 0 = 3/4
-	                            of RAM or of the cgroup's limit */
+	double hello_timeout_s;   /* connect to hello; default 10; 0 = never */
+	double header_timeout_s;  /* first byte of a header to its end;
+	                             default 30; 0 = never */
+	int max_scenes;           /* default 64 */
+	int max_jobs;             /* default 256 (all states) */
+	int max_subscriptions;    /* per connection; default 16 */
+	int max_points;           /* per query; default 1,000,000 */
+	double idle_timeout_s;    /* close connections silent this long;
+	                             default 600; 0 = never */
+	size_t max_output_bytes;  /* per-connection send buffer before the
+	                             drop policy applies; default 8 MiB */
+	size_t job_memory_budget; /* jobs' default memory_budget, bytes;
+	                             0 = none */
+	size_t memory_limit;      /* engine bytes, daemon-wide; 0 = 3/4
+	                             of RAM or of the cgroup's limit */
 	double checkpoint_interval_s; /* default 30 */
 	mb_config modbus;    /* the modbus_* keys (modbus.h, MODBUS.md) */
 	int listen_unix_set; /* listen_unix fixed (given in the file or a

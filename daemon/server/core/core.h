@@ -426,6 +426,7 @@ struct srv {
 	int njobs, jobs_pending; /* pending: job.create in flight */
 	int solver_threads;      /* resolved default threads per job */
 	double accuracy;         /* default accuracy of jobs (config) */
+	double job_budget_mib;   /* default memory_budget of jobs (config) */
 
 	/* inbox: any thread -> I/O thread */
 	pthread_mutex_t inbox_mu;

@@ -25,6 +25,7 @@ int srv_job_options_parse(srv *s, json_t *opts, const char *solver,
 
 	rad_options_default(&ov);
 	rad_options_accuracy(&ov, s->accuracy, NULL);
+	ov.memory_budget = s->job_budget_mib;
 	if (solver && rad_solver_kind_parse(solver, &ov.solver) != RAD_OK) {
 		err->code = RP_ERR_INVALID;
 		snprintf(err->msg, sizeof(err->msg),
