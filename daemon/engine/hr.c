@@ -19,6 +19,9 @@
 #include "hr.h"
 #include "rad.h"
 
+/* Per node, the push's payload (which a later step may need: st->clip). */
+#define PUSH_EXTRA_BYTES (RAD_PUSH_EXTRA * sizeof(float))
+
 /*
  * Energy bound.  What the receivers gather from surfaces in one step
  * cannot exceed what the surfaces send: sum A I <= sum A B per channel
@@ -314,6 +317,7 @@ static rad_status hr_init(rad_solver *sv, rad_error *err)
 		return rad_fail(err, RAD_ERR_NOMEM, "hr: out of memory");
 	}
 	st->wave.link_cost = sizeof(rad_link);
+	st->wave.elem_extra = PUSH_EXTRA_BYTES;
 	sv->impl = st;
 	return RAD_OK;
 }
@@ -339,15 +343,14 @@ static rad_status gather_cancelled(rad_error *err)
 }
 
 /* What the gather allocates after the refinement (gather_bounded, and
- * the push's payload, which a later step may need: st->clip), for
- * elements up to twice as many as now: the room a memory budget keeps
- * free (wave_room). */
+ * the payload) for the nodes there are now: the room a memory budget
+ * keeps free (wave_room; elements made add w->elem_extra each). */
 static size_t gather_reserve(const rad_solver *sv)
 {
 	size_t n = (size_t)sv->scene->npolys * 3 + 1;
 	return n * sizeof(double) + 64 +
-	       (2 * (size_t)sv->h.elems.count + sv->h.clusters.count) *
-	               RAD_PUSH_EXTRA * sizeof(float);
+	       ((size_t)sv->h.elems.count + sv->h.clusters.count) *
+	               PUSH_EXTRA_BYTES;
 }
 
 static rad_status hr_step(rad_solver *sv, rad_error *err)

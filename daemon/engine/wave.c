@@ -169,7 +169,7 @@ static void judge_range(void *ud, size_t b, size_t e, int thread)
 static size_t budget_block(const rad_solver *sv, const rad_wave *w)
 {
 	size_t pair = WAVE_KIDS * (2 * (size_t)w->item_size + w->link_cost) +
-	              4 * sizeof(rad_elem);
+	              4 * (sizeof(rad_elem) + w->elem_extra);
 	size_t m = (size_t)sv->mem.budget / 64 / pair;
 	return m < 64 ? 64 : m > WAVE_DEFER_BLOCK ? WAVE_DEFER_BLOCK : m;
 }
@@ -311,7 +311,8 @@ int wave_room(const rad_solver *sv, const rad_wave *w, size_t n, size_t rest)
 	size_t kids = n * WAVE_KIDS + w->pending_kids;
 	size_t bytes = list_growth(&w->todo, kids, item) +
 	               list_growth(&w->held, n, item) +
-	               n * (WAVE_KIDS * w->link_cost + 4 * sizeof(rad_elem)) +
+	               n * (WAVE_KIDS * w->link_cost +
+	                    4 * (sizeof(rad_elem) + w->elem_extra)) +
 	               rest * w->link_cost + w->pending;
 	return wave_room_for(sv, w, bytes);
 }
@@ -345,7 +346,7 @@ size_t wave_split_bytes(const rad_hier *h, rad_wave *w, uint32_t r, uint32_t s,
 	int ns = side == 3 ? nr : side & 2 ? child_count(h, s, &splits) : 1;
 	w->pending_kids += (size_t)(nr * ns);
 	return (size_t)(nr * ns) * w->link_cost +
-	       (size_t)splits * 4 * sizeof(rad_elem);
+	       (size_t)splits * 4 * (sizeof(rad_elem) + w->elem_extra);
 }
 
 rad_status wave_failed(const rad_solver *sv, rad_status rs, rad_error *err)

@@ -48,6 +48,8 @@ typedef struct rad_wave {
 	size_t pending_kids; /* and the children pairs they will list */
 	size_t link_cost;    /* bytes a pair at its level takes: hr a link;
 	                        rmb nothing, its records being optional */
+	size_t elem_extra;   /* the solver's scratch per element made (the
+	                        part of w->reserve that grows with them) */
 	int defer;     /* set by the caller: a cancel within a wave stops it
 	                  after the block under way (WAVE_DEFER_BLOCK), the
 	                  items not judged left for the caller to keep */
