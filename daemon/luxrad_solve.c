@@ -574,6 +574,8 @@ int main(int argc, char **argv)
 		cli_print_help(&a);
 		return EXIT_OKAY;
 	}
+	if (a.compact_bvh)
+		rad_bvh_set_mode(RAD_BVH_COMPACT);
 	if (a.points_path)
 		rc = tool_points_load(PROG, a.points_path, &pl.xyz, &pl.n);
 	if (rc == EXIT_OKAY)

@@ -65,6 +65,9 @@ static const tool_option tool_options[] = {
          "print one JSON object on stdout instead of the report"},
         {"per-iteration", NULL, T_FLAG, ARG(per_iteration),
          "print statistics to stderr after every iteration"},
+        {"compact-bvh", NULL, T_FLAG, ARG(compact_bvh),
+         "lay the BVH out compactly: about 28 % less of its memory, rays "
+         "about 10 % slower, the same results"},
         {"help", NULL, T_HELP, ARG(help), "show this help"},
 };
 

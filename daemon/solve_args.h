@@ -23,6 +23,7 @@ typedef struct cli_args {
 	uint32_t audit_every;       /* > 0: audit one link in this many */
 	int json;                   /* one JSON object on stdout */
 	int per_iteration;          /* a stats line on stderr after each step */
+	int compact_bvh;            /* RAD_BVH_COMPACT */
 	int help;
 	int given[RAD_NOPTIONS]; /* engine options seen on the line */
 	int reparse;             /* cli_parse's second pass (--accuracy) */

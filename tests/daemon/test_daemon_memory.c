@@ -239,6 +239,44 @@ static void test_a_job_budget_holds(void **state)
 	dm_pass();
 }
 
+/* The BVH of a job's scene in a daemon started with args, and its lux
+ * at the Cornell box's floor. */
+static long long job_bvh(const char **args, double *lux)
+{
+	dm_daemon *d = dm_start(args);
+	dm_conn *c = dm_open(d, NULL);
+	json_t *sc = NULL;
+	json_t *job = dm_solve_sample(c, "cornell.gltf", &sc);
+	json_t *r = dm_ok(c, "{s:s, s:O}", "cmd", "job.info", "job", job);
+	json_t *k = dm_get(dm_get(dm_get(dm_get(r, "job"), "stats"), "memory"),
+	                   "by_kind");
+	long long bvh = dm_int(k, "bvh");
+	json_decref(r);
+	const double pt[6] = {0.278, 0.001, 0.28, 0, 1, 0};
+	dm_query_points(c, job, pt, 1, lux);
+	json_decref(job);
+	json_decref(sc);
+	dm_close(c);
+	dm_stop(d);
+	return bvh;
+}
+
+/* bvh = compact: the job's solver process builds the smaller BVH, and
+ * the lux is the same to the bit. */
+static void test_compact_bvh(void **state)
+{
+	(void)state;
+	const char *compact[] = {"--bvh", "compact", NULL};
+	double lux_fast, lux_compact;
+	long long fast = job_bvh(NULL, &lux_fast);
+	long long small = job_bvh(compact, &lux_compact);
+	print_message("BVH %lld bytes, compact %lld; %.9g lx both\n", fast,
+	              small, lux_fast);
+	assert_true(small < fast);
+	assert_true(lux_fast == lux_compact && lux_fast > 0);
+	dm_pass();
+}
+
 static void write_limit(const char *path, const char *limit)
 {
 	FILE *f = fopen(path, "w");
@@ -316,6 +354,7 @@ int main(void)
 	        T(test_a_job_over_the_limit_fails_alone),
 	        T(test_no_new_work_while_the_limit_is_reached),
 	        T(test_a_job_budget_holds),
+	        T(test_compact_bvh),
 #undef T
 	};
 	const char *filter = getenv("LUXRAD_TEST_FILTER");

@@ -635,6 +635,43 @@ static void test_budget_holds(void **state)
 	rad_mem_free(&m, RAD_MEM_STUDY, c);
 }
 
+/* The compact BVH (rad_bvh_set_mode) holds less and finds the same hits:
+ * the same lux to the bit. */
+static void test_compact_bvh_same_results(void **state)
+{
+	(void)state;
+	double lux[2][2];
+	int64_t bvh[2];
+	for (int k = 0; k < 2; k++) {
+		rad_bvh_set_mode(k ? RAD_BVH_COMPACT : RAD_BVH_FAST);
+		rad_scene *s = NULL;
+		rad_error err;
+		assert_int_equal(build_grid_room(24, &s, &err), RAD_OK);
+		rad_mem_report r;
+		rad_scene_memory(s, &r);
+		bvh[k] = r.bytes[RAD_MEM_BVH];
+		rad_options o;
+		rad_options_default(&o);
+		o.threads = 1;
+		rad_solver *sv = NULL;
+		assert_int_equal(rad_solver_new(s, &o, &sv, &err), RAD_OK);
+		for (int i = 0; i < 2; i++)
+			assert_int_equal(rad_solver_step(sv, &err), RAD_OK);
+		const double pts[12] = {0.5,  1e-3, 0.5,  0, 1, 0,
+		                        0.04, 1e-3, 0.04, 0, 1, 0};
+		assert_int_equal(
+		        rad_solver_illuminance(sv, pts, 2, lux[k], &err),
+		        RAD_OK);
+		rad_solver_free(sv);
+		rad_scene_free(s);
+	}
+	rad_bvh_set_mode(RAD_BVH_FAST);
+	print_message("BVH %lld bytes, compact %lld\n", (long long)bvh[0],
+	              (long long)bvh[1]);
+	assert_true(bvh[1] < bvh[0]);
+	assert_memory_equal(lux[0], lux[1], sizeof(lux[0]));
+}
+
 /*
  * One limit over two processes: a child process shares a counter page
  * with its parent, builds a scene and dies without freeing it (as a
@@ -721,6 +758,7 @@ int main(void)
 	        cmocka_unit_test(test_elem_regions_derived),
 	        cmocka_unit_test(test_limit_refuses_cleanly),
 	        cmocka_unit_test(test_budget_holds),
+	        cmocka_unit_test(test_compact_bvh_same_results),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }

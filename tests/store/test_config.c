@@ -109,6 +109,7 @@ static void test_defaults_match_the_header(void **state)
 	assert_int_equal(c.max_output_bytes, 8u << 20);
 	assert_true(c.checkpoint_interval_s == 30);
 	assert_int_equal(c.job_memory_budget, 0);
+	assert_int_equal(c.bvh, 0);
 	char msg[512];
 	assert_int_equal(srv_config_check(&c, msg, sizeof(msg)), 0);
 }

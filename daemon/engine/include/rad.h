@@ -130,6 +130,20 @@ int64_t rad_mem_process_bytes(void);
 uint64_t rad_mem_limit_refusals(void);
 
 /*
+ * How the scenes committed from now on lay out their BVH, process-wide.
+ * RAD_BVH_FAST is Embree's default (triangles copied into its leaves);
+ * RAD_BVH_COMPACT keeps indices into the vertex buffer the engine shares
+ * with Embree (RTC_SCENE_FLAG_COMPACT).  The rays find the same hits
+ * either way, so results are the same to the bit; compact trades ray
+ * speed for memory (README, "Memory accounting": measured on the grand
+ * hall and the 1M-triangle field).
+ */
+typedef enum rad_bvh_mode { RAD_BVH_FAST = 0, RAD_BVH_COMPACT } rad_bvh_mode;
+#define RAD_BVH_CHOICES "fast", "compact"
+void rad_bvh_set_mode(rad_bvh_mode mode);
+rad_bvh_mode rad_bvh_get_mode(void);
+
+/*
  * One limit over several processes (the daemon and its solver
  * processes).  After rad_mem_share(g, own), every count of this process
  * is also added to g->bytes and to *own, the limit is judged against

@@ -104,6 +104,10 @@ static const cfg_key keys[] = {
          "a solver process that has not stopped this long after it was asked "
          "to (pause, cancel, time budget, shutdown) is killed; its job keeps "
          "its last iteration; 0 = never"},
+        {"bvh", K_CHOICE, F(bvh), 0, 0, "LAYOUT", "compact",
+         "how scenes lay out their BVH: fast = Embree's default; compact "
+         "= about 28 % less of its memory for rays about 10 % slower, the "
+         "same results"},
         {"query_threads", K_INT, F(query_threads), 1, 256, "N", "4",
          "threads answering queries and exports (1..256)"},
         {"accuracy", K_REAL, F(accuracy), RAD_ACCURACY_MIN, RAD_ACCURACY_MAX,
@@ -184,9 +188,11 @@ typedef struct cfg_choice {
 } cfg_choice;
 static const char *const tls_names[] = {"auto", "all", "off", NULL};
 static const char *const isolation_names[] = {"process", "thread", NULL};
+static const char *const bvh_names[] = {RAD_BVH_CHOICES, NULL};
 static const cfg_choice choices[] = {
         {offsetof(srv_config, tls), tls_names, "a TLS mode"},
         {offsetof(srv_config, isolation), isolation_names, "an isolation"},
+        {offsetof(srv_config, bvh), bvh_names, "a BVH layout"},
 };
 _Static_assert(sizeof(srv_tls_mode) == sizeof(int) &&
                        sizeof(srv_isolation) == sizeof(int),
@@ -299,6 +305,7 @@ void srv_config_default(srv_config *c)
 	c->max_output_bytes = 8 * MiB;
 	c->memory_limit = 0;
 	c->job_memory_budget = 0;
+	c->bvh = RAD_BVH_FAST;
 	c->checkpoint_interval_s = 30;
 	mb_config_default(&c->modbus);
 }

@@ -36,30 +36,31 @@ typedef enum srv_isolation {
 } srv_isolation;
 
 typedef struct srv_config {
-	char config_file[4096];       /* "" = none (embedded defaults only) */
-	char listen_tcp[300];         /* host:port, "" = no TCP; default
-	                                 127.0.0.1:7420 */
-	char listen_unix[4096];       /* socket path, "" = none; default
-	                                 <data_dir>/luxradd.sock, or
-	                                 $RUNTIME_DIRECTORY/luxradd.sock when
-	                                 systemd sets it */
-	char metrics_listen[300];     /* host:port for GET /metrics, "" = off;
-	                                 default 127.0.0.1:7421 */
-	char data_dir[4096];          /* default: $STATE_DIRECTORY, else
-	                                 $XDG_STATE_HOME/luxradd, else
-	                                 ~/.local/state/luxradd; /var/lib/luxradd
-	                                 for root */
-	char token_file[4096];        /* "" = no token */
-	char users_file[4096];        /* "" = no users (cmd/users.c) */
-	srv_tls_mode tls;             /* which TCP listeners speak TLS */
-	char tls_cert_file[4096];     /* PEM chain, leaf first; "" = none */
-	char tls_key_file[4096];      /* PEM private key; "" = none */
-	int require_token;            /* 1: token even on loopback / Unix */
-	int workers;                  /* jobs solved at once; default 2 */
-	int solver_threads;           /* engine threads per job; 0 = cores /
-	                                 workers, at least 1 */
-	int query_threads;            /* threads answering queries; default 2 */
-	srv_isolation isolation;      /* where solvers run; default process */
+	char config_file[4096];   /* "" = none (embedded defaults only) */
+	char listen_tcp[300];     /* host:port, "" = no TCP; default
+	                             127.0.0.1:7420 */
+	char listen_unix[4096];   /* socket path, "" = none; default
+	                             <data_dir>/luxradd.sock, or
+	                             $RUNTIME_DIRECTORY/luxradd.sock when
+	                             systemd sets it */
+	char metrics_listen[300]; /* host:port for GET /metrics, "" = off;
+	                             default 127.0.0.1:7421 */
+	char data_dir[4096];      /* default: $STATE_DIRECTORY, else
+	                             $XDG_STATE_HOME/luxradd, else
+	                             ~/.local/state/luxradd; /var/lib/luxradd
+	                             for root */
+	char token_file[4096];    /* "" = no token */
+	char users_file[4096];    /* "" = no users (cmd/users.c) */
+	srv_tls_mode tls;         /* which TCP listeners speak TLS */
+	char tls_cert_file[4096]; /* PEM chain, leaf first; "" = none */
+	char tls_key_file[4096];  /* PEM private key; "" = none */
+	int require_token;        /* 1: token even on loopback / Unix */
+	int workers;              /* jobs solved at once; default 2 */
+	int solver_threads;       /* engine threads per job; 0 = cores /
+	                             workers, at least 1 */
+	int query_threads;        /* threads answering queries; default 2 */
+	srv_isolation isolation;  /* where solvers run; default process */
+	int bvh; /* scenes' BVH layout, a rad_bvh_mode; default fast */
 	double solver_stop_timeout_s; /* a solver process asked to stop is
 	                                 killed after this; 0 = never */
 	double accuracy;              /* jobs' default accuracy (rad_options) */

@@ -498,6 +498,7 @@ rad_status srv_runner_build(srv_runner *r, rad_error *err)
 	in.opt.progress_ud = NULL;
 	in.opt.cancel = NULL;
 	in.mem_limit = rad_mem_limit();
+	in.bvh_mode = (int)rad_bvh_get_mode();
 	snprintf(in.name, sizeof(in.name), "%s", j->name);
 	in.scene_len = len;
 	rad_status st;

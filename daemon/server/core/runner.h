@@ -130,6 +130,7 @@ typedef struct srv_wpage {
 typedef struct srv_winit {
 	rad_options opt; /* pointers cleared */
 	int64_t mem_limit;
+	int bvh_mode;       /* rad_bvh_mode, the daemon's */
 	char name[256];     /* the job's name (fault injection) */
 	uint64_t scene_len; /* the scene's bytes follow */
 } srv_winit;

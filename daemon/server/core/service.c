@@ -146,6 +146,8 @@ int srv_core_init(srv *s, const srv_config *cfg, el_loop *loop, char *msg,
 	long cores = sysconf(_SC_NPROCESSORS_ONLN);
 	int w = cfg->workers > 0 ? cfg->workers : 1;
 	s->accuracy = cfg->accuracy;
+	rad_bvh_set_mode(cfg->bvh == RAD_BVH_COMPACT ? RAD_BVH_COMPACT
+	                                             : RAD_BVH_FAST);
 	s->job_budget_mib = (double)cfg->job_memory_budget / 1048576.0;
 	s->solver_threads = cfg->solver_threads > 0
 	                            ? cfg->solver_threads

@@ -119,6 +119,8 @@ static void do_init(worker *w, unsigned char *buf, size_t len)
 	in.name[sizeof(in.name) - 1] = '\0';
 	w->fault = srv_fault_for(in.name);
 	rad_mem_set_limit(in.mem_limit);
+	rad_bvh_set_mode(in.bvh_mode == RAD_BVH_COMPACT ? RAD_BVH_COMPACT
+	                                                : RAD_BVH_FAST);
 	uint64_t refusals = rad_mem_limit_refusals();
 	sio_info info;
 	sio_sensor *sensors = NULL;
