@@ -223,7 +223,6 @@ static rad_status build_cluster(rad_hier *h, uint32_t c, rad_error *err)
 	cl->child = kids;
 	rad_cluster *a = rad_cluster_at(h, kids),
 	            *b = rad_cluster_at(h, kids + 1);
-	a->parent = b->parent = c;
 	a->first = first;
 	a->count = half;
 	b->first = first + half;
@@ -310,7 +309,6 @@ rad_status rad_hier_init(rad_hier *h, const rad_scene *s, rad_mem *mem,
 		for (uint32_t i = 0; i < n; i++)
 			measure_exposed(h, rad_elem_at(h, i));
 	rad_cluster *root = rad_cluster_at(h, 0);
-	root->parent = RAD_NONE;
 	root->first = 0;
 	root->count = n;
 	rad_status st = build_cluster(h, 0, err);

@@ -171,7 +171,6 @@ typedef struct rad_cluster {
 	float n[3];         /* sum of area x unit normal, |n| <= area */
 	float m[6];         /* sum of area x n n^T: xx yy zz xy xz yz */
 	float q;            /* scale of the even part (DESIGN); 0 on leaves */
-	uint32_t parent;    /* RAD_NONE for the root */
 	uint32_t child;     /* first of 2 child clusters, RAD_NONE = leaf */
 	uint32_t first, count; /* range of order[] covered */
 	uint32_t links;        /* head of the links received */
@@ -203,6 +202,7 @@ typedef struct rad_link {
 /* Sizes the memory study measures by (Regions; links above). */
 _Static_assert(sizeof(rad_elem) == 60, "rad_elem grew");
 _Static_assert(sizeof(rad_link) == 24, "rad_link grew");
+_Static_assert(sizeof(rad_cluster) == 160, "rad_cluster grew");
 
 typedef struct rad_hier {
 	const rad_scene *scene;

@@ -12,8 +12,9 @@
  *     element's four children name it as parent, its polygon, one level
  *     more, and its four quarters in path order; the leaves counted
  *     are nleaves;
- *   - clusters: the children of a cluster name it as parent and split its
- *     range of order[] in two, in order, and its area;
+ *   - clusters: the children of a cluster split its range of order[] in
+ *     two, in order, and its area (a cluster keeps no parent: nothing
+ *     walks up the tree);
  *   - links: every link on a node's list names that node as receiver and
  *     a source inside its pool, and is active (lists are classic HR's,
  *     which keeps no passive links).
@@ -111,8 +112,6 @@ static int check_cluster(checker *c, uint32_t id, unsigned depth)
 		return fail(c, "cluster's children outside the pool", id);
 	const rad_cluster *a = rad_cluster_at(h, cl->child);
 	const rad_cluster *b = rad_cluster_at(h, cl->child + 1);
-	if (a->parent != id || b->parent != id)
-		return fail(c, "child cluster disowns its parent", id);
 	if (a->first != cl->first || b->first != a->first + a->count ||
 	    a->count + b->count != cl->count)
 		return fail(c, "child clusters do not split the range", id);

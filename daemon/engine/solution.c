@@ -32,10 +32,10 @@
 
 #define SOL_MAGIC 0x534c5852u /* "RXLS" little-endian: "luxrad solution" */
 #define SOL_VERSION                                                            \
-	5u /* 2: clusters carry their orientation moments; 3:                  \
+	6u /* 2: clusters carry their orientation moments; 3:                  \
 	    * and where their irradiance came from; 4: elements their          \
 	    * exposed fraction (hier.h, Covered parts); 5: their path, not     \
-	    * their region (hier.h, Regions) */
+	    * their region (hier.h, Regions); 6: clusters no parent */
 
 struct rad_solution {
 	const rad_scene *scene;
@@ -184,10 +184,8 @@ static void copy_clusters(const rad_hier *src, rad_hier *dst)
 		if (c->child == RAD_NONE)
 			continue;
 		uint32_t first = next;
-		for (uint32_t k = 0; k < 2; k++) {
+		for (uint32_t k = 0; k < 2; k++)
 			out[first + k] = *rad_cluster_at(src, c->child + k);
-			out[first + k].parent = i;
-		}
 		c->child = first;
 		next += 2;
 	}
