@@ -470,7 +470,7 @@ static rad_status build_grid_room(int n, rad_scene **out, rad_error *err)
 }
 
 /*
- * The process-wide limit: under every limit from 2.5 % to 100 % of what
+ * The process-wide limit: under every limit from 2.5 % to 110 % of what
  * a scene needs at its peak, the scene is either made or refused with
  * RAD_ERR_NOMEM -- by our own allocations or by Embree's, through its
  * memory monitor -- and a refusal leaves nothing counted.  A solver over
@@ -492,7 +492,9 @@ static void test_limit_refuses_cleanly(void **state)
 
 	uint64_t refused0 = rad_mem_limit_refusals();
 	int made = 0, by_embree = 0, by_us = 0;
-	for (int i = 1; i <= 40; i++) {
+	/* Up to 110 %: Embree's build does not take the same bytes every
+	 * time (its threads), so the peak measured once is not a bound. */
+	for (int i = 1; i <= 44; i++) {
 		rad_mem_set_limit(base + need * i / 40);
 		rad_status st = build_grid_room(24, &s, &err);
 		rad_mem_set_limit(0);
@@ -509,7 +511,7 @@ static void test_limit_refuses_cleanly(void **state)
 		}
 		assert_int_equal(rad_mem_process_bytes(), base);
 	}
-	print_message("40 limits: %d scenes made, %d refused by Embree's "
+	print_message("44 limits: %d scenes made, %d refused by Embree's "
 	              "monitor, %d by counted allocations\n",
 	              made, by_embree, by_us);
 	assert_true(made >= 1 && by_embree >= 1 && by_us >= 1);
