@@ -92,13 +92,12 @@ static v3 node_sample(const rad_hier *h, uint32_t t, const double *cum,
 	return patch_point(&p, s);
 }
 
-/* One link: its sums into its class. */
-static void audit_link(const rad_solver *sv, const rad_link *l, uint32_t id,
-                       const rad_audit_options *o, double *cum_r, double *cum_s,
-                       rad_audit *out)
+/* One link r <- s of form factor ff: its sums into its class. */
+static void audit_link(const rad_solver *sv, uint32_t r, uint32_t s, double ff,
+                       uint32_t id, const rad_audit_options *o, double *cum_r,
+                       double *cum_s, rad_audit *out)
 {
 	const rad_hier *h = &sv->h;
-	uint32_t r = l->rcv, s = l->src;
 	double d = v3_len(v3_sub(node_center(h, r), node_center(h, s)));
 	int near = fmax(node_size(h, r), node_size(h, s)) > d;
 	int k = 4 * near + 2 * node_is_cluster(r) + node_is_cluster(s);
@@ -130,8 +129,8 @@ static void audit_link(const rad_solver *sv, const rad_link *l, uint32_t id,
 	double n = o->samples;
 	rad_audit_class *c = &out->cls[k];
 	c->links++;
-	c->stored_form += ar * l->ff * bs;
-	c->stored_transfer += ar * l->ff * node_emit_factor(h, r, s, 0) * bs;
+	c->stored_form += ar * ff * bs;
+	c->stored_transfer += ar * ff * node_emit_factor(h, r, s, 0) * bs;
 	c->mc_form += ar * as * form / n * bs;
 	c->mc_transfer += ar * as * transfer / n;
 }
@@ -152,11 +151,12 @@ typedef struct audit_walk {
 } audit_walk;
 
 /* One gathered link, if it is the one in `every` to audit. */
-static void visit(audit_walk *w, const rad_link *l, uint32_t id)
+static void visit(audit_walk *w, uint32_t r, uint32_t s, double ff, uint32_t id)
 {
 	/* Not from a light: its transfer is exact already. */
-	if (!node_is_light(l->src) && w->seen++ % w->o->every == 0)
-		audit_link(w->sv, l, id, w->o, w->cum_r, w->cum_s, w->out);
+	if (!node_is_light(s) && w->seen++ % w->o->every == 0)
+		audit_link(w->sv, r, s, ff, id, w->o, w->cum_r, w->cum_s,
+		           w->out);
 }
 
 /* rmb: the leaves of the link hierarchy under link id are what it
@@ -165,7 +165,7 @@ static void walk_tree(audit_walk *w, uint32_t id)
 {
 	const rad_link *l = rad_link_at(&w->sv->h, id);
 	if (l->child == RAD_NONE) {
-		visit(w, l, id);
+		visit(w, l->rcv, l->src, l->ff, id);
 		return;
 	}
 	for (uint32_t k = 0; k < l->nchild; k++)
@@ -176,8 +176,8 @@ static void walk_tree(audit_walk *w, uint32_t id)
 static rad_status node_links(rad_solver *sv, void *ud, uint32_t t)
 {
 	for (uint32_t id = *rad_node_links(&sv->h, t); id != RAD_NONE;) {
-		const rad_link *l = rad_link_at(&sv->h, id);
-		visit(ud, l, id);
+		const rad_hlink *l = rad_hlink_at(&sv->h, id);
+		visit(ud, t, l->src, l->ff, id);
 		id = l->next;
 	}
 	return RAD_OK;

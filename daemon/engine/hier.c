@@ -268,7 +268,7 @@ int rad_elem_keep_exposed(const rad_hier *h, uint32_t id, v3 *pts, v3 *nrm,
 }
 
 rad_status rad_hier_init(rad_hier *h, const rad_scene *s, rad_mem *mem,
-                         double min_edge, rad_error *err)
+                         double min_edge, uint32_t link_size, rad_error *err)
 {
 	memset(h, 0, sizeof(*h));
 	h->scene = s;
@@ -285,7 +285,7 @@ rad_status rad_hier_init(rad_hier *h, const rad_scene *s, rad_mem *mem,
 	              shift, n);
 	rad_pool_init(&h->clusters, mem, RAD_MEM_ELEM_CLUSTER,
 	              sizeof(rad_cluster), shift, 0);
-	rad_pool_init(&h->links, mem, RAD_MEM_LINKS, sizeof(rad_link),
+	rad_pool_init(&h->links, mem, RAD_MEM_LINKS, link_size,
 	              shift < 10 ? shift + 2 : 12, 0);
 	if (n == 0)
 		return rad_fail(err, RAD_ERR_INVALID, "scene has no polygons");
@@ -705,7 +705,8 @@ uint32_t rad_link_new(rad_hier *h, uint32_t rcv, uint32_t src, float ff,
 	l->src = src;
 	l->ff = ff;
 	l->spread = spread;
-	l->next = l->child = RAD_NONE;
+	l->child = RAD_NONE;
+	l->nchild = l->flags = 0;
 	return id;
 }
 

@@ -13,12 +13,13 @@
  *     RAD_CLUSTER_LEAF_MAX polygons, a contiguous range of order[].
  *     Every cluster covers a contiguous range of order[], so "the polygons
  *     in this cluster" is a range, never a list walk.
- *   - links (rad_link): receiver <- source transfers with their form factor.
- *     Classic HR chains them per receiver through `next` and frees
- *     refined links; the reduced-memory solver keeps a refined (passive)
- *     link with its children (consecutive records: `child`, `nchild`) and
- *     no lists per receiver.  Each uses one of the two, so they share
- *     their word: a link is 24 bytes, not 28.
+ *   - links: receiver <- source transfers with their form factor, of
+ *     one of two kinds, the pool's records being the solver's.  Classic
+ *     HR (rad_hlink, 16 bytes) chains them on their receiver's list, which
+ *     says whose they are, and frees refined links.  The reduced-memory
+ *     solver (rad_link, 24 bytes) keeps no lists; a link names both its
+ *     ends, and a refined (passive) one keeps its children (consecutive
+ *     records: `child`, `nchild`) for the link hierarchy.
  *
  * Liveness: walk the trees (polygon roots 0 .. npolys-1, root cluster 0),
  * never a pool's id range: pools may hold records skipped so that sibling
@@ -185,23 +186,28 @@ enum {
 };
 
 typedef struct rad_link {
-	uint32_t rcv; /* tagged receiver id */
-	uint32_t src; /* tagged source id */
-	float ff;     /* F(rcv <- src), visibility included; for a light,
-	                 irradiance (lux) per unit of its intensity */
-	float spread; /* max - min of ff over the receiver's points */
-	union {
-		uint32_t next;  /* hr: next link on the same receiver */
-		uint32_t child; /* rmb: first child link (passive), or
-		                   RAD_NONE */
-	};
+	uint32_t rcv;    /* tagged receiver id */
+	uint32_t src;    /* tagged source id */
+	float ff;        /* F(rcv <- src), visibility included; for a light,
+	                    irradiance (lux) per unit of its intensity */
+	float spread;    /* max - min of ff over the receiver's points */
+	uint32_t child;  /* first child link (passive), or RAD_NONE */
 	uint16_t nchild; /* number of consecutive children */
 	uint16_t flags;  /* RAD_LINK_* */
 } rad_link;
 
+/* A link of classic HR, on its receiver's list (rad_node_links). */
+typedef struct rad_hlink {
+	uint32_t src;  /* tagged source id */
+	float ff;      /* as rad_link's */
+	float spread;  /* as rad_link's */
+	uint32_t next; /* next link on the same receiver, or RAD_NONE */
+} rad_hlink;
+
 /* Sizes the memory study measures by (Regions; links above). */
 _Static_assert(sizeof(rad_elem) == 60, "rad_elem grew");
 _Static_assert(sizeof(rad_link) == 24, "rad_link grew");
+_Static_assert(sizeof(rad_hlink) == 16, "rad_hlink grew");
 _Static_assert(sizeof(rad_cluster) == 160, "rad_cluster grew");
 
 typedef struct rad_hier {
@@ -209,7 +215,7 @@ typedef struct rad_hier {
 	rad_mem *mem;      /* the owning solver's counters */
 	rad_pool elems;    /* rad_elem, ELEM_SURFACE */
 	rad_pool clusters; /* rad_cluster, ELEM_CLUSTER */
-	rad_pool links;    /* rad_link, LINKS */
+	rad_pool links;    /* rad_link, or rad_hlink for hr; LINKS */
 	uint32_t *order;   /* polygon ids in cluster order, ELEM_CLUSTER */
 	uint32_t nleaves;  /* surface leaves */
 	double min_edge;   /* elements with a longer edge may split */
@@ -227,6 +233,10 @@ static inline rad_cluster *rad_cluster_at(const rad_hier *h, uint32_t id)
 static inline rad_link *rad_link_at(const rad_hier *h, uint32_t id)
 {
 	return (rad_link *)rad_pool_at(&h->links, id);
+}
+static inline rad_hlink *rad_hlink_at(const rad_hier *h, uint32_t id)
+{
+	return (rad_hlink *)rad_pool_at(&h->links, id);
 }
 
 #define RAD_EXPOSED_ALL 255u
@@ -280,11 +290,12 @@ int rad_elem_keep_exposed(const rad_hier *h, uint32_t id, v3 *pts, v3 *nrm,
 double rad_hier_cover_dist(const rad_hier *h, uint32_t poly);
 
 /*
- * Build the polygon roots and the cluster tree.  min_edge in metres.
+ * Build the polygon roots and the cluster tree.  min_edge in metres;
+ * link_size the solver's link record (sizeof rad_link or rad_hlink).
  * On failure everything allocated is released.
  */
 rad_status rad_hier_init(rad_hier *h, const rad_scene *s, rad_mem *mem,
-                         double min_edge, rad_error *err);
+                         double min_edge, uint32_t link_size, rad_error *err);
 void rad_hier_destroy(rad_hier *h);
 /*
  * Check the trees and link lists (hier_check.c): 0, or -1 with msg naming
@@ -367,7 +378,8 @@ static inline double rad_luma(const float c[3])
 	return RAD_LUMA_R * c[0] + RAD_LUMA_G * c[1] + RAD_LUMA_B * c[2];
 }
 
-/* Link store: allocate one link (zeroed, child = RAD_NONE), or RAD_NONE. */
+/* Link store (rad_link): allocate one link (child = RAD_NONE, nchild and
+ * flags 0), or RAD_NONE. */
 uint32_t rad_link_new(rad_hier *h, uint32_t rcv, uint32_t src, float ff,
                       float spread);
 /* Projected area of a cluster's polygons in unit direction d (DESIGN):

@@ -15,9 +15,9 @@
  *   - clusters: the children of a cluster split its range of order[] in
  *     two, in order, and its area (a cluster keeps no parent: nothing
  *     walks up the tree);
- *   - links: every link on a node's list names that node as receiver and
- *     a source inside its pool, and is active (lists are classic HR's,
- *     which keeps no passive links).
+ *   - links: a node's list (classic HR's rad_hlink) stays inside the
+ *     pool without a loop, and each link names a source inside its
+ *     pool.
  */
 #include <math.h>
 #include <stdio.h>
@@ -50,23 +50,16 @@ static int check_links(checker *c, uint32_t head, uint32_t tagged)
 {
 	const rad_hier *h = c->h;
 	uint64_t seen = 0;
-	for (uint32_t l = head; l != RAD_NONE; l = rad_link_at(h, l)->next) {
+	for (uint32_t l = head; l != RAD_NONE; l = rad_hlink_at(h, l)->next) {
 		if (l >= h->links.count || ++seen > h->links.count)
 			return fail(c, "link list leaves the pool or loops",
 			            tagged);
-		const rad_link *k = rad_link_at(h, l);
-		if (k->rcv != tagged)
-			return fail(c,
-			            "link on a node's list names another "
-			            "receiver",
-			            tagged);
+		const rad_hlink *k = rad_hlink_at(h, l);
 		uint32_t src = k->src & ~RAD_TAG_MASK;
 		if ((k->src & RAD_TAG_CLUSTER) ? src >= h->clusters.count
 		    : (k->src & RAD_TAG_LIGHT) ? src >= h->scene->nlights
 		                               : src >= h->elems.count)
 			return fail(c, "link source outside its pool", tagged);
-		if (k->flags & RAD_LINK_PASSIVE)
-			return fail(c, "passive link on a node's list", tagged);
 	}
 	return 0;
 }

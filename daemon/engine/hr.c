@@ -88,7 +88,7 @@ static void gather_list(gather_job *g, uint32_t rcv, uint32_t head, float I[3],
 	rad_hier *h = g->h;
 	double lit[3] = {0, 0, 0}, surf[3] = {0, 0, 0}, rows = 0, fsum = 0;
 	for (uint32_t id = head; id != RAD_NONE;) {
-		const rad_link *l = rad_link_at(h, id);
+		const rad_hlink *l = rad_hlink_at(h, id);
 		int light = node_is_light(l->src);
 		double b[3];
 		double f = l->ff * node_emit_factor(h, rcv, l->src, 0);
@@ -265,8 +265,8 @@ static rad_status count_node(rad_solver *sv, void *ud, uint32_t t)
 {
 	const rad_hier *h = &sv->h;
 	for (uint32_t id = *rad_node_links(&sv->h, t); id != RAD_NONE;
-	     id = rad_link_at(h, id)->next)
-		node_count_link(ud, rad_link_at(h, id));
+	     id = rad_hlink_at(h, id)->next)
+		node_count_link(ud, t, rad_hlink_at(h, id)->src);
 	return RAD_OK;
 }
 
@@ -280,8 +280,8 @@ static rad_status study_node(rad_solver *sv, void *ud, uint32_t t)
 	const rad_hier *h = &sv->h;
 	int first = *(const int *)ud;
 	for (uint32_t id = *rad_node_links(&sv->h, t); id != RAD_NONE;
-	     id = rad_link_at(h, id)->next) {
-		const rad_link *l = rad_link_at(h, id);
+	     id = rad_hlink_at(h, id)->next) {
+		const rad_hlink *l = rad_hlink_at(h, id);
 		double b = node_luma_B(h, l->src), inc = b;
 		if (!first && node_is_light(l->src))
 			inc = 0;
@@ -291,7 +291,7 @@ static rad_status study_node(rad_solver *sv, void *ud, uint32_t t)
 			                ? rad_luma(
 			                          rad_cluster_at(h, l->src)->dB)
 			                : rad_luma(rad_elem_at(h, l->src)->dB));
-		node_stat_exchange(sv, l->rcv, l->src, l->ff, b, inc);
+		node_stat_exchange(sv, t, l->src, l->ff, b, inc);
 	}
 	return RAD_OK;
 }
@@ -316,7 +316,7 @@ static rad_status hr_init(rad_solver *sv, rad_error *err)
 			rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, st);
 		return rad_fail(err, RAD_ERR_NOMEM, "hr: out of memory");
 	}
-	st->wave.link_cost = sizeof(rad_link);
+	st->wave.link_cost = sizeof(rad_hlink);
 	st->wave.elem_extra = PUSH_EXTRA_BYTES;
 	sv->impl = st;
 	return RAD_OK;

@@ -794,15 +794,15 @@ void node_stat_exchange(rad_solver *sv, uint32_t r, uint32_t s, double ff,
 	S->energy_hist[bin]++;
 }
 
-void node_count_link(rad_stats *s, const rad_link *l)
+void node_count_link(rad_stats *s, uint32_t rcv, uint32_t src)
 {
-	int rc = node_is_cluster(l->rcv);
+	int rc = node_is_cluster(rcv);
 	s->links++;
-	if (node_is_light(l->src))
+	if (node_is_light(src))
 		s->links_light++;
-	else if (rc && node_is_cluster(l->src))
+	else if (rc && node_is_cluster(src))
 		s->links_cc++;
-	else if (rc || node_is_cluster(l->src))
+	else if (rc || node_is_cluster(src))
 		s->links_sc++;
 	else
 		s->links_ss++;

@@ -88,8 +88,9 @@ double node_oracle(const rad_solver *sv, uint32_t rcv, uint32_t src, double b,
  */
 void node_stat_exchange(rad_solver *sv, uint32_t r, uint32_t s, double ff,
                         double b, double inc);
-/* Count a stored link in s->links and its kind (links_ss ... light). */
-void node_count_link(rad_stats *s, const rad_link *l);
+/* Count a stored link rcv <- src in s->links and its kind (links_ss ...
+ * light). */
+void node_count_link(rad_stats *s, uint32_t rcv, uint32_t src);
 /*
  * The factor a link's form factor is used with when src is a cluster: what
  * it sends towards rcv against its mean radiosity (delta: dB) times its

@@ -104,11 +104,15 @@ static uint8_t judge(rad_solver *sv, const void *item, int may_split,
 static rad_status store_link(rad_solver *sv, uint32_t r, uint32_t s, float ff,
                              float spread)
 {
-	uint32_t id = rad_link_new(&sv->h, r, s, ff, spread);
+	uint32_t id = rad_pool_add(&sv->h.links, 1);
 	if (id == RAD_NONE)
 		return RAD_ERR_NOMEM;
 	uint32_t *head = rad_node_links(&sv->h, r);
-	rad_link_at(&sv->h, id)->next = *head;
+	rad_hlink *l = rad_hlink_at(&sv->h, id);
+	l->src = s;
+	l->ff = ff;
+	l->spread = spread;
+	l->next = *head;
 	*head = id;
 	sv->stats.links_created++;
 	return RAD_OK;
@@ -261,13 +265,14 @@ rad_status hr_initial_links(rad_solver *sv, hr_state *st)
 	return rs;
 }
 
-/* Unlink the link *prev points to, queue its pair for splitting. */
-static rad_status requeue(rad_solver *sv, hr_state *st, uint32_t *prev,
-                          int rcv_only)
+/* Unlink the link of receiver r that *prev points to, queue its pair for
+ * splitting. */
+static rad_status requeue(rad_solver *sv, hr_state *st, uint32_t r,
+                          uint32_t *prev, int rcv_only)
 {
 	uint32_t id = *prev;
-	rad_link *l = rad_link_at(&sv->h, id);
-	rad_status rs = hold_pair(sv, st, l->rcv, l->src, rcv_only);
+	rad_hlink *l = rad_hlink_at(&sv->h, id);
+	rad_status rs = hold_pair(sv, st, r, l->src, rcv_only);
 	if (rs)
 		return rs;
 	*prev = l->next;
@@ -282,7 +287,7 @@ static rad_status requeue(rad_solver *sv, hr_state *st, uint32_t *prev,
  * a leaf's links share a sign, so they are added, not combined in
  * quadrature (measured: quadrature let leaves in a closed box drift 20 %).
  */
-static double link_error(const rad_hier *h, const rad_link *l)
+static double link_error(const rad_hier *h, const rad_hlink *l)
 {
 	return 0.5 * node_luma_B(h, l->src) * l->spread;
 }
@@ -302,7 +307,7 @@ static rad_status budget_cut(rad_solver *sv, hr_state *st, uint32_t head,
 {
 	const rad_hier *h = &sv->h;
 	size_t n = 0;
-	for (uint32_t id = head; id != RAD_NONE; id = rad_link_at(h, id)->next)
+	for (uint32_t id = head; id != RAD_NONE; id = rad_hlink_at(h, id)->next)
 		n++;
 	if (n > st->vals_cap) {
 		double *v = rad_mem_realloc(&sv->mem, RAD_MEM_SCRATCH, st->vals,
@@ -313,8 +318,8 @@ static rad_status budget_cut(rad_solver *sv, hr_state *st, uint32_t head,
 		st->vals_cap = n;
 	}
 	n = 0;
-	for (uint32_t id = head; id != RAD_NONE; id = rad_link_at(h, id)->next)
-		st->vals[n++] = link_error(h, rad_link_at(h, id));
+	for (uint32_t id = head; id != RAD_NONE; id = rad_hlink_at(h, id)->next)
+		st->vals[n++] = link_error(h, rad_hlink_at(h, id));
 	qsort(st->vals, n, sizeof(double), cmp_desc);
 	*cut = 0;
 	for (size_t i = 0; i < n && total > budget; i++) {
@@ -332,20 +337,21 @@ static rad_status budget_cut(rad_solver *sv, hr_state *st, uint32_t head,
  * errors are pushed to the receiver's children.  *kept gets the error of
  * the links that stay.
  */
-static rad_status retest_list(rad_solver *sv, hr_state *st, uint32_t *head,
+static rad_status retest_list(rad_solver *sv, hr_state *st, uint32_t r,
                               double budget, double *kept)
 {
 	rad_hier *h = &sv->h;
+	uint32_t *head = rad_node_links(h, r);
 	double total = 0;
 	for (uint32_t *prev = head; *prev != RAD_NONE;) {
-		rad_link *l = rad_link_at(h, *prev);
+		rad_hlink *l = rad_hlink_at(h, *prev);
 		/* A zero link (cluster pair whose samples saw nothing) is
 		 * judged on its bound: its sources may have lit up. */
-		double f = l->ff > 0 ? l->ff : node_ff_bound(h, l->rcv, l->src);
-		if (wave_refinable(h, l->rcv, l->src) &&
-		    oracle(sv, l->rcv, l->src, f) > sv->opt.eps &&
-		    room_to_split(sv, st, l->rcv, l->src, 0)) {
-			rad_status rs = requeue(sv, st, prev, 0);
+		double f = l->ff > 0 ? l->ff : node_ff_bound(h, r, l->src);
+		if (wave_refinable(h, r, l->src) &&
+		    oracle(sv, r, l->src, f) > sv->opt.eps &&
+		    room_to_split(sv, st, r, l->src, 0)) {
+			rad_status rs = requeue(sv, st, r, prev, 0);
 			if (rs)
 				return rs;
 			continue;
@@ -354,18 +360,16 @@ static rad_status retest_list(rad_solver *sv, hr_state *st, uint32_t *head,
 		prev = &l->next;
 	}
 	*kept = total;
-	if (total <= budget || *head == RAD_NONE ||
-	    !node_splittable(h, rad_link_at(h, *head)->rcv))
+	if (total <= budget || *head == RAD_NONE || !node_splittable(h, r))
 		return RAD_OK;
 	double cut;
 	rad_status rs = budget_cut(sv, st, *head, total, budget, &cut);
 	for (uint32_t *prev = head; !rs && *prev != RAD_NONE;) {
-		rad_link *l = rad_link_at(h, *prev);
+		rad_hlink *l = rad_hlink_at(h, *prev);
 		double v = link_error(h, l);
-		if (v >= cut && v > 0 &&
-		    room_to_split(sv, st, l->rcv, l->src, 1)) {
+		if (v >= cut && v > 0 && room_to_split(sv, st, r, l->src, 1)) {
 			total -= v;
-			rs = requeue(sv, st, prev, 1);
+			rs = requeue(sv, st, r, prev, 1);
 		} else {
 			prev = &l->next;
 		}
@@ -403,8 +407,8 @@ static rad_status retest_elem(rad_solver *sv, hr_state *st, uint32_t id,
                               double above)
 {
 	double kept;
-	rad_status rs = retest_list(sv, st, &rad_elem_at(&sv->h, id)->links,
-	                            local_limit(sv, id) - above, &kept);
+	rad_status rs =
+	        retest_list(sv, st, id, local_limit(sv, id) - above, &kept);
 	uint32_t c = rad_elem_at(&sv->h, id)->child;
 	for (uint32_t k = 0; k < 4 && !rs && c != RAD_NONE; k++)
 		rs = retest_elem(sv, st, c + k, above + kept);
@@ -444,7 +448,7 @@ static rad_status retest_cluster(rad_solver *sv, void *ud, uint32_t t)
 	double kept;
 	if (!node_is_cluster(t))
 		return RAD_OK;
-	return retest_list(sv, ud, rad_node_links(&sv->h, t), INFINITY, &kept);
+	return retest_list(sv, ud, t, INFINITY, &kept);
 }
 
 rad_status hr_retest_links(rad_solver *sv, hr_state *st)

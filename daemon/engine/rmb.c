@@ -182,7 +182,7 @@ static void count_tree(rad_solver *sv, rmb_state *st, uint32_t id)
 {
 	rad_stats *s = &sv->stats;
 	rad_link *l = rad_link_at(&sv->h, id);
-	node_count_link(s, l);
+	node_count_link(s, l->rcv, l->src);
 	if (l->flags & L_NEW) {
 		s->links_created++;
 		if (sv->opt.study &&

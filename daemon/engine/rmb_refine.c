@@ -344,7 +344,7 @@ static rad_status split_item(rad_solver *sv, const rmb_item *it, int rcv_only)
 			rad_link *c = rad_link_at(h, run + (uint32_t)k);
 			c->rcv = kid[k].rcv;
 			c->src = kid[k].src;
-			c->next = c->child = RAD_NONE;
+			c->child = RAD_NONE;
 			c->flags = L_NEW;
 			kid[k].link = run + (uint32_t)k;
 		}

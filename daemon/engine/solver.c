@@ -63,7 +63,11 @@ rad_status rad_solver_new(const rad_scene *scene, const rad_options *opt,
 	st = rad_par_new(opt->threads, &sv->par, err);
 	if (!st)
 		st = rad_hier_init(&sv->h, scene, &sv->mem,
-		                   opt->min_edge_rel * scene->diag, err);
+		                   opt->min_edge_rel * scene->diag,
+		                   opt->solver == RAD_SOLVER_HR
+		                           ? sizeof(rad_hlink)
+		                           : sizeof(rad_link),
+		                   err);
 	if (!st)
 		st = sv->ops->init(sv, err);
 	if (st == RAD_ERR_NOMEM && atomic_load(&sv->mem.budget_refusals))

@@ -248,7 +248,7 @@ static void test_scene_and_solver_return_to_zero(void **state)
 
 /* Every solver's tree and links keep their invariants, and the check
  * finds a broken one (a child that disowns its parent, a wrong leaf
- * count, a link on the wrong list). */
+ * count, a link from a source outside the pool). */
 /* Plant a break in the tree (flip the low bit of *field), check that
  * rad_hier_check finds it and names it with part, and mend it. */
 static void expect_planted(rad_hier *h, uint32_t *field, const char *part)
@@ -292,7 +292,9 @@ static void test_elem_regions_derived(void **state)
 	rad_mem mem;
 	rad_mem_init(&mem);
 	rad_hier h;
-	assert_int_equal(rad_hier_init(&h, s, &mem, 0.0, &err), RAD_OK);
+	assert_int_equal(
+	        rad_hier_init(&h, s, &mem, 0.0, sizeof(rad_link), &err),
+	        RAD_OK);
 	for (uint32_t root = 0; root < 2; root++) {
 		uint32_t id = root;
 		while (rad_elem_can_split(&h, rad_elem_at(&h, id))) {
@@ -367,11 +369,16 @@ static void test_hier_invariants(void **state)
 			assert_true(split != RAD_NONE && linked != RAD_NONE);
 			rad_elem *ch =
 			        rad_elem_at(h, rad_elem_at(h, split)->child);
-			rad_link *l =
-			        rad_link_at(h, rad_elem_at(h, linked)->links);
+			rad_hlink *l =
+			        rad_hlink_at(h, rad_elem_at(h, linked)->links);
 			expect_planted(h, &ch->parent, "disowns its parent");
 			expect_planted(h, &h->nleaves, "nleaves");
-			expect_planted(h, &l->rcv, "another receiver");
+			uint32_t src = l->src;
+			l->src = rad_pool_capacity(&h->elems);
+			assert_int_equal(rad_hier_check(h, msg, sizeof(msg)),
+			                 -1);
+			assert_non_null(strstr(msg, "outside its pool"));
+			l->src = src;
 			assert_int_equal(rad_hier_check(h, msg, sizeof(msg)),
 			                 0);
 		}
