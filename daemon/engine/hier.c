@@ -11,6 +11,7 @@
 
 #include <float.h>
 #include <math.h>
+#include <stdatomic.h>
 #include <string.h>
 
 #include "ff.h"
@@ -270,7 +271,9 @@ int rad_elem_keep_exposed(const rad_hier *h, uint32_t id, v3 *pts, v3 *nrm,
 rad_status rad_hier_init(rad_hier *h, const rad_scene *s, rad_mem *mem,
                          double min_edge, uint32_t link_size, rad_error *err)
 {
+	static _Atomic uint64_t next_gen = 1;
 	memset(h, 0, sizeof(*h));
+	h->gen = atomic_fetch_add(&next_gen, 1);
 	h->scene = s;
 	h->mem = mem;
 	h->min_edge = min_edge;
@@ -354,15 +357,21 @@ int rad_elem_can_split(const rad_hier *h, const rad_elem *e)
 void rad_region_quarter(float p0[3], float e1[3], float e2[3], int quad, int k)
 {
 	/* Triangle: three corner copies and the inverted centre triangle;
-	 * parallelogram: the four quarter cells.  Same orientation. */
-	v3 o = v3_f(p0), h1 = v3_scale(v3_f(e1), 0.5);
-	v3 h2 = v3_scale(v3_f(e2), 0.5);
-	v3 org[4] = {o, v3_add(o, h1), v3_add(o, h2),
-	             v3_add(v3_add(o, h1), h2)};
-	int flip = k == 3 && !quad;
-	v3_store_f(p0, org[k]);
-	v3_store_f(e1, flip ? v3_scale(h1, -1) : h1);
-	v3_store_f(e2, flip ? v3_scale(h2, -1) : h2);
+	 * parallelogram: the four quarter cells.  Same orientation.  Sums
+	 * in double, rounded once to float (the origin of quarter 3 is
+	 * (p0 + e1/2) + e2/2, not two float sums). */
+	double s = k == 3 && !quad ? -0.5 : 0.5;
+	for (int i = 0; i < 3; i++) {
+		double o = p0[i], h1 = 0.5 * (double)e1[i],
+		       h2 = 0.5 * (double)e2[i];
+		if (k & 1)
+			o += h1;
+		if (k & 2)
+			o += h2;
+		p0[i] = (float)o;
+		e1[i] = (float)(s * (double)e1[i]);
+		e2[i] = (float)(s * (double)e2[i]);
+	}
 }
 
 void rad_elem_region(const rad_hier *h, const rad_elem *e, float p0[3],
@@ -382,6 +391,28 @@ void rad_elem_patch(const rad_hier *h, const rad_elem *e, rad_patch *p)
 	float p0[3], e1[3], e2[3];
 	rad_elem_region(h, e, p0, e1, e2);
 	rad_patch_from_floats(p, p0, e1, e2, rad_elem_quad(h, e));
+}
+
+#define PATCH_MEMO 4 /* entries, by element id modulo */
+static _Thread_local struct {
+	uint64_t gen;
+	uint32_t id;
+	rad_patch p;
+} patch_memo[PATCH_MEMO];
+
+void rad_elem_patch_id(const rad_hier *h, uint32_t id, rad_patch *p)
+{
+	unsigned k = id % PATCH_MEMO;
+	if (h->gen && patch_memo[k].gen == h->gen && patch_memo[k].id == id) {
+		*p = patch_memo[k].p;
+		return;
+	}
+	rad_elem_patch(h, rad_elem_at(h, id), p);
+	if (h->gen) {
+		patch_memo[k].gen = h->gen;
+		patch_memo[k].id = id;
+		patch_memo[k].p = *p;
+	}
 }
 
 uint32_t rad_elem_split(rad_hier *h, uint32_t id)

@@ -220,6 +220,8 @@ typedef struct rad_hier {
 	uint32_t nleaves;  /* surface leaves */
 	double min_edge;   /* elements with a longer edge may split */
 	uint64_t splits;   /* element splits since last reset */
+	uint64_t gen;      /* unique per rad_hier_init (0: none), the key of
+	                      rad_elem_patch_id's memo */
 } rad_hier;
 
 static inline rad_elem *rad_elem_at(const rad_hier *h, uint32_t id)
@@ -311,6 +313,11 @@ void rad_elem_region(const rad_hier *h, const rad_elem *e, float p0[3],
                      float e1[3], float e2[3]);
 /* Element e's region as a patch (rad_patch_from_floats). */
 void rad_elem_patch(const rad_hier *h, const rad_elem *e, rad_patch *p);
+/* The same for element id, through a small memo per thread: judging a
+ * pair asks for its two patches several times (hr_nodes.c).  An element
+ * keeps its id and region while its hierarchy lives, and a hierarchy's
+ * gen is never reused, so a memo entry is never stale. */
+void rad_elem_patch_id(const rad_hier *h, uint32_t id, rad_patch *p);
 /* Quarter k (0..3) of the region (p0, e1, e2), in place: the geometry
  * rad_elem_split gives child k. */
 void rad_region_quarter(float p0[3], float e1[3], float e2[3], int quad, int k);

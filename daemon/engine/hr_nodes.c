@@ -30,8 +30,7 @@ static const rad_light *node_light(const rad_hier *h, uint32_t t)
 
 static void elem_patch(const rad_hier *h, uint32_t id, rad_patch *p)
 {
-	const rad_elem *e = rad_elem_at(h, id);
-	rad_elem_patch(h, e, p);
+	rad_elem_patch_id(h, id, p);
 }
 
 double node_luma_B(const rad_hier *h, uint32_t t)
