@@ -103,13 +103,29 @@ static double reflected(const rad_elem *e, const float E[3])
  * correlation of the two across it (a wall brighter on its side nearer
  * the point), a bias that adds up over many far elements.
  */
-static double children_rf(const gather *g, const rad_elem *e, const float E[3])
+/* An element's region (hier.h, Regions), handed down the walk so that a
+ * child's is one quarter step from its parent's. */
+typedef struct region {
+	float p0[3], e1[3], e2[3];
+} region;
+
+static region quarter(const region *r, int quad, int k)
+{
+	region q = *r;
+	rad_region_quarter(q.p0, q.e1, q.e2, quad, k);
+	return q;
+}
+
+static double children_rf(const gather *g, const rad_elem *e, const region *re,
+                          const float E[3])
 {
 	double rf = 0;
+	int quad = rad_elem_quad(g->h, e);
 	for (uint32_t k = 0; k < 4; k++) {
 		const rad_elem *c = rad_elem_at(g->h, e->child + k);
+		region rc = quarter(re, quad, (int)k);
 		rad_patch q;
-		rad_elem_patch(g->h, c, &q);
+		rad_patch_from_floats(&q, rc.p0, rc.e1, rc.e2, quad);
 		rf += reflected(c, E) * rad_ff_point_patch(g->x, g->n, &q);
 	}
 	return rf;
@@ -224,16 +240,17 @@ static void near_leaves(gather *g)
 /* The reflected radiosity B - E of element id and below (E: the uniform
  * emission already counted exactly on the whole polygon, or zero; rp: the
  * parent's B - E, or -1 for a root). */
-static void gather_elem(gather *g, uint32_t id, const float E[3], double rp,
-                        ray_memo *memo)
+static void gather_elem(gather *g, uint32_t id, const region *re,
+                        const float E[3], double rp, ray_memo *memo)
 {
 	const rad_elem *e = rad_elem_at(g->h, id);
 	double r = reflected(e, E);
 	/* On a black emitter B - E is only the rounding of the pull. */
 	if (r <= NOISE_REL * rad_luma(E))
 		return;
+	int quad = rad_elem_quad(g->h, e);
 	rad_patch p;
-	rad_elem_patch(g->h, e, &p);
+	rad_patch_from_floats(&p, re->p0, re->e1, re->e2, quad);
 	/* The kernel is additive over a partition: F = 0 here means nothing
 	 * below is seen either. */
 	double F = rad_ff_point_patch(g->x, g->n, &p);
@@ -259,12 +276,14 @@ static void gather_elem(gather *g, uint32_t id, const float E[3], double rp,
 	    !far_enough(g, query_patch_size(&p), d, r * F)) {
 		ray_memo kids;
 		kids.n = 0;
-		for (uint32_t k = 0; k < 4; k++)
-			gather_elem(g, e->child + k, E, r, &kids);
+		for (uint32_t k = 0; k < 4; k++) {
+			region rc = quarter(re, quad, (int)k);
+			gather_elem(g, e->child + k, &rc, E, r, &kids);
+		}
 		return;
 	}
 	/* The children's weighting rf / F is the piece's radiosity weight. */
-	double rf = children_rf(g, e, E);
+	double rf = children_rf(g, e, re, E);
 	if (!(rf > 0))
 		return;
 	double v = query_visible_ff(g, &p, F, rf / F, memo) / F;
@@ -279,8 +298,12 @@ static void gather_poly(gather *g, uint32_t pid)
 	const rad_poly *poly = &s->polys[pid];
 	const rad_material *m = &s->mats[poly->mat];
 	double e = rad_luma(m->emit);
+	region root;
+	memcpy(root.p0, poly->p0, sizeof(root.p0));
+	memcpy(root.e1, poly->e1, sizeof(root.e1));
+	memcpy(root.e2, poly->e2, sizeof(root.e2));
 	if (e <= 0) {
-		gather_elem(g, pid, none, -1, NULL);
+		gather_elem(g, pid, &root, none, -1, NULL);
 		return;
 	}
 	rad_patch p;
@@ -293,7 +316,7 @@ static void gather_poly(gather *g, uint32_t pid)
 		g->total += c;
 		g->direct += c;
 	}
-	gather_elem(g, pid, m->emit, -1, &memo);
+	gather_elem(g, pid, &root, m->emit, -1, &memo);
 }
 
 static v3 box_centre(const rad_cluster *c)
