@@ -116,7 +116,26 @@ typedef struct judge_job {
 	wave_judge_fn judge;
 } judge_job;
 
-static int split_side(const rad_hier *h, uint32_t r, uint32_t s, int rcv_only);
+/* Which end of a pair to refine: 1 the receiver, 2 the source, 3 both
+ * (a cluster's self-link). */
+static int split_side(const rad_hier *h, uint32_t r, uint32_t s, int rcv_only)
+{
+	if (r == s)
+		return 3;
+	int rs = node_splittable(h, r), ss = node_splittable(h, s);
+	if (rcv_only && rs)
+		return 1;
+	if (rs && ss)
+		return node_size(h, r) >= node_size(h, s) ? 1 : 2;
+	return rs ? 1 : 2;
+}
+
+/* Bytes an element split takes: four elements and the solver's scratch
+ * for them. */
+static size_t elem_split_bytes(const rad_wave *w)
+{
+	return 4 * (sizeof(rad_elem) + w->elem_extra);
+}
 
 /* 1 if splitting the pair item starts with makes no element and no link
  * record: rmb (whose children may stay transient) over elements already
@@ -169,7 +188,7 @@ static void judge_range(void *ud, size_t b, size_t e, int thread)
 static size_t budget_block(const rad_solver *sv, const rad_wave *w)
 {
 	size_t pair = WAVE_KIDS * (2 * (size_t)w->item_size + w->link_cost) +
-	              4 * (sizeof(rad_elem) + w->elem_extra);
+	              elem_split_bytes(w);
 	size_t m = (size_t)sv->mem.budget / 64 / pair;
 	return m < 64 ? 64 : m > WAVE_DEFER_BLOCK ? WAVE_DEFER_BLOCK : m;
 }
@@ -182,9 +201,9 @@ rad_status wave_run(rad_solver *sv, rad_wave *w, const void *items, size_t n,
 	 * does not change in a way it reads (links are stored, pairs
 	 * held), so the verdicts and the order they are applied in are
 	 * the same either way.  Verdicts are held for one block. */
-	size_t block = w->defer || sv->mem.budget ? WAVE_DEFER_BLOCK : n;
-	if (sv->mem.budget)
-		block = budget_block(sv, w);
+	size_t block = sv->mem.budget ? budget_block(sv, w)
+	               : w->defer     ? WAVE_DEFER_BLOCK
+	                              : n;
 	size_t held = n < block ? n : block;
 	if (held > w->verdict_cap) {
 		wave_verdict *v =
@@ -245,20 +264,6 @@ uint8_t wave_at_level(const rad_solver *sv, uint32_t r, uint32_t s, double b,
 	return f > 0 ? WAVE_LEVEL : WAVE_DROP;
 }
 
-/* Which end of a pair to refine: 1 the receiver, 2 the source, 3 both
- * (a cluster's self-link). */
-static int split_side(const rad_hier *h, uint32_t r, uint32_t s, int rcv_only)
-{
-	if (r == s)
-		return 3;
-	int rs = node_splittable(h, r), ss = node_splittable(h, s);
-	if (rcv_only && rs)
-		return 1;
-	if (rs && ss)
-		return node_size(h, r) >= node_size(h, s) ? 1 : 2;
-	return rs ? 1 : 2;
-}
-
 int wave_children(rad_hier *h, uint32_t r, uint32_t s, int rcv_only,
                   uint32_t kr[WAVE_KIDS], uint32_t ks[WAVE_KIDS], int *side)
 {
@@ -311,8 +316,7 @@ int wave_room(const rad_solver *sv, const rad_wave *w, size_t n, size_t rest)
 	size_t kids = n * WAVE_KIDS + w->pending_kids;
 	size_t bytes = list_growth(&w->todo, kids, item) +
 	               list_growth(&w->held, n, item) +
-	               n * (WAVE_KIDS * w->link_cost +
-	                    4 * (sizeof(rad_elem) + w->elem_extra)) +
+	               n * (WAVE_KIDS * w->link_cost + elem_split_bytes(w)) +
 	               rest * w->link_cost + w->pending;
 	return wave_room_for(sv, w, bytes);
 }
@@ -346,7 +350,7 @@ size_t wave_split_bytes(const rad_hier *h, rad_wave *w, uint32_t r, uint32_t s,
 	int ns = side == 3 ? nr : side & 2 ? child_count(h, s, &splits) : 1;
 	w->pending_kids += (size_t)(nr * ns);
 	return (size_t)(nr * ns) * w->link_cost +
-	       (size_t)splits * 4 * (sizeof(rad_elem) + w->elem_extra);
+	       (size_t)splits * elem_split_bytes(w);
 }
 
 rad_status wave_failed(const rad_solver *sv, rad_status rs, rad_error *err)
