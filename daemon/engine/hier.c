@@ -302,7 +302,7 @@ rad_status rad_hier_init(rad_hier *h, const rad_scene *s, rad_mem *mem,
 	for (uint32_t i = 0; i < n; i++) {
 		rad_elem *e = rad_elem_at(h, i);
 		e->poly = i;
-		e->parent = e->child = e->links = RAD_NONE;
+		e->child = e->links = RAD_NONE;
 		e->exposed = RAD_EXPOSED_ALL;
 		h->order[i] = i;
 	}
@@ -427,7 +427,6 @@ uint32_t rad_elem_split(rad_hier *h, uint32_t id)
 	for (int k = 0; k < 4; k++) {
 		rad_elem *ch = rad_elem_at(h, c + (uint32_t)k);
 		ch->poly = e->poly;
-		ch->parent = id;
 		ch->child = ch->links = RAD_NONE;
 		memcpy(ch->B, e->B, sizeof(ch->B));
 		memcpy(ch->dB, e->dB, sizeof(ch->dB));

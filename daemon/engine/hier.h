@@ -66,7 +66,9 @@
  * depth at RAD_ELEM_MAX_LEVEL (16): an element's edge is then at least
  * 1/65536 of its polygon's, where the default min_edge stops refinement
  * at 1/200 of the scene's diagonal.  Storing the region (36 bytes) and
- * the area made an element 96 bytes; it is 60 now.
+ * the area made an element 96 bytes.  Nor does an element keep its
+ * parent: the walks come down the trees, and progressive's fresh
+ * children carry theirs.  It is 56 bytes.
  * Covered parts.  Scenes lay panels, windows, luminaires and boards a
  * few millimetres in front of walls and ceilings.  The part of a surface
  * behind such a cover takes no light and sends none, and an element that
@@ -156,7 +158,6 @@
 
 typedef struct rad_elem {
 	uint32_t poly;           /* root polygon (geometry, material, normal) */
-	uint32_t parent;         /* RAD_NONE for a root */
 	uint32_t child;          /* first of 4 children, RAD_NONE for a leaf */
 	uint32_t links;          /* head of the links received, or RAD_NONE */
 	float B[3], I[3], dB[3]; /* see DESIGN */
@@ -205,7 +206,7 @@ typedef struct rad_hlink {
 } rad_hlink;
 
 /* Sizes the memory study measures by (Regions; links above). */
-_Static_assert(sizeof(rad_elem) == 60, "rad_elem grew");
+_Static_assert(sizeof(rad_elem) == 56, "rad_elem grew");
 _Static_assert(sizeof(rad_link) == 24, "rad_link grew");
 _Static_assert(sizeof(rad_hlink) == 16, "rad_hlink grew");
 _Static_assert(sizeof(rad_cluster) == 160, "rad_cluster grew");

@@ -8,8 +8,8 @@
  * silent corruption into an error that names the node.
  *
  * What holds:
- *   - elements: each polygon root is element i with no parent; an
- *     element's four children name it as parent, its polygon, one level
+ *   - elements: each polygon root is element i at level 0; an
+ *     element's four children name its polygon, one level
  *     more, and its four quarters in path order; the leaves counted
  *     are nleaves;
  *   - clusters: the children of a cluster split its range of order[] in
@@ -78,8 +78,7 @@ static int check_elem(checker *c, uint32_t id)
 		return fail(c, "element's children outside the pool", id);
 	for (uint32_t k = 0; k < 4; k++) {
 		const rad_elem *ch = rad_elem_at(h, e->child + k);
-		if (ch->parent != id || ch->poly != e->poly ||
-		    ch->level != e->level + 1)
+		if (ch->poly != e->poly || ch->level != e->level + 1)
 			return fail(c, "child element disowns its parent", id);
 		if (ch->level > RAD_ELEM_MAX_LEVEL ||
 		    ch->path != (e->path | k << (2 * e->level)))
@@ -123,8 +122,7 @@ int rad_hier_check(const rad_hier *h, char *msg, size_t len)
 		return fail(&c, "fewer elements than polygons", npolys);
 	for (uint32_t i = 0; i < npolys; i++) {
 		const rad_elem *e = rad_elem_at(h, i);
-		if (e->parent != RAD_NONE || e->poly != i || e->level != 0 ||
-		    e->path != 0)
+		if (e->poly != i || e->level != 0 || e->path != 0)
 			return fail(&c, "polygon root misplaced", i);
 		if (check_elem(&c, i) != 0)
 			return -1;

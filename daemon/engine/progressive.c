@@ -104,12 +104,13 @@ typedef struct shooter {
 
 /* One receiver leaf in an evaluation round; written by one index only. */
 typedef struct rcv_item {
-	uint32_t elem;  /* leaf element id */
-	uint32_t patch; /* index of the patch it lies in */
-	int fresh;      /* a new child: gathers its past irradiance first */
-	double past[3]; /* fresh: irradiance from all earlier shots, lux */
-	double dI[3];   /* irradiance received from this shot, lux */
-	double spread;  /* largest photopic spread one source gives, lux */
+	uint32_t elem;   /* leaf element id */
+	uint32_t patch;  /* index of the patch it lies in */
+	int fresh;       /* a new child: gathers its past irradiance first */
+	uint32_t parent; /* fresh: the element it was split from */
+	double past[3];  /* fresh: irradiance from all earlier shots, lux */
+	double dI[3];    /* irradiance received from this shot, lux */
+	double spread;   /* largest photopic spread one source gives, lux */
 	uint64_t rays;
 } rcv_item;
 
@@ -442,7 +443,7 @@ static int wants_split(const rad_hier *h, const rcv_item *it, double limit)
 static void adopt_past(rad_solver *sv, prog_impl *p, const rcv_item *it)
 {
 	rad_elem *e = rad_elem_at(&sv->h, it->elem);
-	const rad_elem *parent = rad_elem_at(&sv->h, e->parent);
+	const rad_elem *parent = rad_elem_at(&sv->h, it->parent);
 	const rad_material *m = rad_elem_mat(&sv->h, e);
 	double w =
 	        rad_elem_area(&sv->h, e) /
@@ -501,8 +502,10 @@ static size_t settle_round(rad_solver *sv, prog_impl *p, const rcv_item *item,
 			continue;
 		}
 		for (uint32_t k = 0; k < 4; k++)
-			next[nn++] = (rcv_item){
-			        .elem = c + k, .patch = it->patch, .fresh = 1};
+			next[nn++] = (rcv_item){.elem = c + k,
+			                        .patch = it->patch,
+			                        .fresh = 1,
+			                        .parent = it->elem};
 	}
 	return nn;
 }

@@ -32,10 +32,11 @@
 
 #define SOL_MAGIC 0x534c5852u /* "RXLS" little-endian: "luxrad solution" */
 #define SOL_VERSION                                                            \
-	6u /* 2: clusters carry their orientation moments; 3:                  \
+	7u /* 2: clusters carry their orientation moments; 3:                  \
 	    * and where their irradiance came from; 4: elements their          \
 	    * exposed fraction (hier.h, Covered parts); 5: their path, not     \
-	    * their region (hier.h, Regions); 6: clusters no parent */
+	    * their region (hier.h, Regions); 6: clusters no parent; 7: nor    \
+	    * elements */
 
 struct rad_solution {
 	const rad_scene *scene;
@@ -163,10 +164,8 @@ static uint32_t copy_elems(const rad_hier *src, rad_hier *dst)
 			continue;
 		}
 		uint32_t first = next;
-		for (uint32_t k = 0; k < 4; k++) {
+		for (uint32_t k = 0; k < 4; k++)
 			out[first + k] = *rad_elem_at(src, e->child + k);
-			out[first + k].parent = i;
-		}
 		e->child = first;
 		next += 4;
 	}

@@ -371,7 +371,7 @@ static void test_hier_invariants(void **state)
 			        rad_elem_at(h, rad_elem_at(h, split)->child);
 			rad_hlink *l =
 			        rad_hlink_at(h, rad_elem_at(h, linked)->links);
-			expect_planted(h, &ch->parent, "disowns its parent");
+			expect_planted(h, &ch->poly, "disowns its parent");
 			expect_planted(h, &h->nleaves, "nleaves");
 			uint32_t src = l->src;
 			l->src = rad_pool_capacity(&h->elems);
