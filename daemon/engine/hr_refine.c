@@ -124,8 +124,7 @@ static rad_status hold_pair(rad_solver *sv, hr_state *st, uint32_t r,
                             uint32_t s, int rcv_only)
 {
 	if (sv->mem.budget)
-		st->wave.pending +=
-		        wave_split_bytes(&sv->h, &st->wave, r, s, rcv_only);
+		wave_pend_split(&sv->h, &st->wave, r, s, rcv_only);
 	return push_pair(sv, &st->wave.held, r, s, (uint32_t)rcv_only);
 }
 
@@ -138,13 +137,7 @@ static int room_to_split(rad_solver *sv, hr_state *st, uint32_t r, uint32_t s,
 	if (!sv->mem.budget)
 		return 1;
 	if (!w->at_budget) {
-		size_t kids = w->pending_kids;
-		size_t b = wave_split_bytes(&sv->h, w, r, s, rcv_only);
-		w->pending += b;
-		int room = wave_room(sv, w, 1, 0);
-		w->pending -= b;
-		w->pending_kids = kids;
-		if (room)
+		if (wave_room_split(sv, w, r, s, rcv_only))
 			return 1;
 		w->at_budget = 1;
 	}

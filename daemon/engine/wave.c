@@ -304,7 +304,10 @@ static size_t list_growth(const wave_list *l, size_t extra, size_t item)
 	return (c - l->cap) * item;
 }
 
-int wave_room(const rad_solver *sv, const rad_wave *w, size_t n, size_t rest)
+/* wave_room with one more split of `more` bytes and `more_kids` children
+ * pairs besides those pending. */
+static int room_with(const rad_solver *sv, const rad_wave *w, size_t n,
+                     size_t rest, size_t more, size_t more_kids)
 {
 	if (!sv->mem.budget)
 		return 1;
@@ -313,12 +316,17 @@ int wave_room(const rad_solver *sv, const rad_wave *w, size_t n, size_t rest)
 	 * split; each of the rest judged after them may become a link; the
 	 * pairs applied already take w->pending (and pending_kids items). */
 	size_t item = w->item_size;
-	size_t kids = n * WAVE_KIDS + w->pending_kids;
+	size_t kids = n * WAVE_KIDS + w->pending_kids + more_kids;
 	size_t bytes = list_growth(&w->todo, kids, item) +
 	               list_growth(&w->held, n, item) +
 	               n * (WAVE_KIDS * w->link_cost + elem_split_bytes(w)) +
-	               rest * w->link_cost + w->pending;
+	               rest * w->link_cost + w->pending + more;
 	return wave_room_for(sv, w, bytes);
+}
+
+int wave_room(const rad_solver *sv, const rad_wave *w, size_t n, size_t rest)
+{
+	return room_with(sv, w, n, rest, 0, 0);
 }
 
 int wave_room_for(const rad_solver *sv, const rad_wave *w, size_t bytes)
@@ -342,15 +350,33 @@ static int child_count(const rad_hier *h, uint32_t t, int *splits)
 	return 4;
 }
 
-size_t wave_split_bytes(const rad_hier *h, rad_wave *w, uint32_t r, uint32_t s,
-                        int rcv_only)
+/* Bytes that making the children pairs of pair r <- s (as wave_children
+ * would: element splits) and storing each at its level takes at most;
+ * *kids gets how many children pairs. */
+static size_t split_cost(const rad_hier *h, const rad_wave *w, uint32_t r,
+                         uint32_t s, int rcv_only, size_t *kids)
 {
 	int side = split_side(h, r, s, rcv_only), splits = 0;
 	int nr = side & 1 ? child_count(h, r, &splits) : 1;
 	int ns = side == 3 ? nr : side & 2 ? child_count(h, s, &splits) : 1;
-	w->pending_kids += (size_t)(nr * ns);
-	return (size_t)(nr * ns) * w->link_cost +
-	       (size_t)splits * elem_split_bytes(w);
+	*kids = (size_t)(nr * ns);
+	return *kids * w->link_cost + (size_t)splits * elem_split_bytes(w);
+}
+
+void wave_pend_split(const rad_hier *h, rad_wave *w, uint32_t r, uint32_t s,
+                     int rcv_only)
+{
+	size_t kids;
+	w->pending += split_cost(h, w, r, s, rcv_only, &kids);
+	w->pending_kids += kids;
+}
+
+int wave_room_split(const rad_solver *sv, const rad_wave *w, uint32_t r,
+                    uint32_t s, int rcv_only)
+{
+	size_t kids;
+	size_t b = split_cost(&sv->h, w, r, s, rcv_only, &kids);
+	return room_with(sv, w, 1, 0, b, kids);
 }
 
 rad_status wave_failed(const rad_solver *sv, rad_status rs, rad_error *err)

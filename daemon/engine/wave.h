@@ -146,11 +146,15 @@ int wave_room(const rad_solver *sv, const rad_wave *w, size_t n, size_t rest);
 /* 1 if `bytes` more still leave a block for each pool and w->reserve
  * free under the solver's memory budget (always 1 without one). */
 int wave_room_for(const rad_solver *sv, const rad_wave *w, size_t bytes);
-/* Bytes that making the children pairs of a pair to refine (as
- * wave_children would: element splits) and storing each at its level
- * takes at most; adds the children to w->pending_kids. */
-size_t wave_split_bytes(const rad_hier *h, rad_wave *w, uint32_t r, uint32_t s,
-                        int rcv_only);
+/* Count in w->pending (and pending_kids) what splitting pair r <- s will
+ * take at most once its children are made (as wave_children would:
+ * element splits, a link for each child). */
+void wave_pend_split(const rad_hier *h, rad_wave *w, uint32_t r, uint32_t s,
+                     int rcv_only);
+/* 1 if that split, with one more pair split at worst, still fits beside
+ * what is pending (wave_room). */
+int wave_room_split(const rad_solver *sv, const rad_wave *w, uint32_t r,
+                    uint32_t s, int rcv_only);
 
 /* A refinement's failure (out of memory), reported with the pool sizes. */
 rad_status wave_failed(const rad_solver *sv, rad_status rs, rad_error *err);
