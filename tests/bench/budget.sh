@@ -17,9 +17,6 @@ set -euo pipefail
 cd "$(dirname "$0")/../.."
 ROOT=$(pwd)
 BUILD="$ROOT/build"
-GEN="$ROOT/scenes/generated"
-VAL="$ROOT/scenes/validation"
-REAL="$ROOT/../shared/scenes/real"
 OUT="$ROOT/tests/bench/out/budget"
 REF="$ROOT/tests/bench/out/validate"
 THREADS=2
@@ -36,19 +33,16 @@ cmake -S "$ROOT" -B "$BUILD" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
 	-DLUXRAD_WERROR=ON -DLUXRAD_SANITIZE= >/dev/null
 cmake --build "$BUILD" -j 2 --target luxrad-solve luxrad-scenegen >/dev/null
 
-# name | scene | points | reference (as in validate.sh)
-scenes=(
-	"hospital|$REAL/renderpark/hospital.gltf|$VAL/hospital.points|mc"
-	"graz|$REAL/renderpark/graz.gltf|$VAL/graz.points|mc"
-	"blender-cornell|$REAL/vinc3r-cornellbox/BJS-2.80-Eevee-gltf/cornellBox-2.80-Eevee-gltf.gltf|$VAL/blender-cornell.points|mc"
-	"box16-0.7|$GEN/box16-0.7.glb|$VAL/box.points|exact:1047.197551"
-)
+# The validation study's rows of these scenes.
+source "$ROOT/tests/bench/validate_scenes.sh"
+ladder=" hospital graz blender-cornell box16-0.7 "
 fracs=(0.75 0.5 0.25)
 
 mkdir -p "$OUT/runs"
 rows=()
 for row in "${scenes[@]}"; do
 	IFS='|' read -r name scene points ref <<<"$row"
+	[[ $ladder == *" $name "* ]] || continue
 	[[ -z $ONLY || $ONLY == "$name" ]] || continue
 	if [[ $ref == mc && ! -s $REF/ref/$name.json ]] ||
 		[[ ! -f $scene ]]; then
@@ -72,13 +66,8 @@ for row in "${scenes[@]}"; do
 			echo "$2" >"$base.budget"
 		}
 		run none 0
-		# The solver's own peak: the joint peak less the scene's bytes.
-		peak=$(/usr/bin/python3 -c '
-import json, sys
-m = json.load(open(sys.argv[1]))["stats"]["memory"]
-k = m["by_kind"]
-scene = sum(k[x] for x in ("geometry", "materials", "lights", "names", "bvh"))
-print((m["peak_work_bytes"] - scene) / 1048576.0)' "$OUT/runs/$name.$solver.none.json")
+		peak=$(/usr/bin/python3 "$ROOT/tests/bench/budget_report.py" \
+			--solver-peak "$OUT/runs/$name.$solver.none.json")
 		for f in "${fracs[@]}"; do
 			run "$f" "$(/usr/bin/python3 -c "print(round($peak * $f, 2))")"
 		done

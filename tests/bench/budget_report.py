@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
 """budget_report.py OUT REF SCENES FRAC... -- the memory-budget ladder.
+budget_report.py --solver-peak JSON -- a solve's own peak, MiB.
 
 Reads what tests/bench/budget.sh left in OUT (runs/NAME.SOLVER.TAG.{json,
 time,rc,err,budget}, TAG "none" or a fraction of the unconstrained
@@ -21,6 +22,8 @@ SCENE_KINDS = ("geometry", "materials", "lights", "names", "bvh")
 
 
 def solver_peak_mib(path):
+    """The solver's own peak in a luxrad-solve --json: the joint peak less
+    the scene's bytes (MiB)."""
     o = vr.load_json(path)
     if o is None or "stats" not in o:
         return float("nan")
@@ -30,6 +33,9 @@ def solver_peak_mib(path):
 
 
 def main():
+    if len(sys.argv) == 3 and sys.argv[1] == "--solver-peak":
+        print(solver_peak_mib(sys.argv[2]))
+        return
     out, refdir, table = sys.argv[1], sys.argv[2], sys.argv[3]
     tags = ["none"] + sys.argv[4:]
     rows = []
