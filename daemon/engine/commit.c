@@ -18,7 +18,7 @@
  * - After the cuts, each two-sided polygon gets its back face, appended
  *   after every polygon the BVH holds (make_back_faces).
  * - A failed commit leaves the scene uncommitted and may be retried (the
- *   merge is skipped once done: s->stage is gone); once merged, the scene
+ *   merge is skipped once done: s->merged); once merged, the scene
  *   takes no more triangles.
  */
 #include <float.h>
@@ -36,57 +36,52 @@
 
 /* ---------------------------------------------------------- quad merging */
 
-/* Directed edge k of staged triangle t runs from vertex k to vertex k+1. */
-static const float *stage_vertex(const float *stage, uint32_t t, int k)
+/* Vertex k (mod 3) of triangle t: directed edge k runs from vertex k to
+ * vertex k+1. */
+static uint32_t tri_vertex(const rad_scene *s, uint32_t t, int k)
 {
-	return stage + (size_t)9 * t + 3 * (k % 3);
+	return s->polys[t].v[k % 3];
 }
 
 typedef struct edge_map {
-	const float *stage;
+	const rad_scene *s;
 	uint32_t *slot; /* t*3 + k of a directed edge, or RAD_NONE; SCRATCH */
 	uint32_t mask;  /* capacity - 1 (a power of two) */
 } edge_map;
 
-static int same_point(const float *a, const float *b)
+/* Slot holding the directed edge a -> b (vertex ids), or the empty slot
+ * ending the probe sequence. */
+static uint32_t *edge_probe(const edge_map *m, uint32_t a, uint32_t b)
 {
-	return a[0] == b[0] && a[1] == b[1] && a[2] == b[2];
-}
-
-/* Slot holding the directed edge a -> b, or the empty slot ending the
- * probe sequence. */
-static uint32_t *edge_probe(const edge_map *m, const float *a, const float *b)
-{
-	uint32_t i = rad_hash_floats6(a, b) & m->mask;
+	const uint32_t ab[2] = {a, b};
+	uint32_t i =
+	        rad_hash_end(rad_hash_words(RAD_HASH_SEED, ab, 2)) & m->mask;
 	for (;; i = (i + 1) & m->mask) {
 		uint32_t e = m->slot[i];
 		if (e == RAD_NONE)
 			return &m->slot[i];
-		const float *ea = stage_vertex(m->stage, e / 3, (int)(e % 3));
-		const float *eb =
-		        stage_vertex(m->stage, e / 3, (int)(e % 3) + 1);
-		if (same_point(ea, a) && same_point(eb, b))
+		int k = (int)(e % 3);
+		if (tri_vertex(m->s, e / 3, k) == a &&
+		    tri_vertex(m->s, e / 3, k + 1) == b)
 			return &m->slot[i];
 	}
 }
 
-static rad_status edge_map_build(edge_map *m, rad_mem *mem, const float *stage,
-                                 uint32_t ntri)
+static rad_status edge_map_build(edge_map *m, rad_scene *s)
 {
-	uint32_t cap = 16; /* load factor <= 3/4 */
+	uint32_t ntri = s->npolys, cap = 16; /* load factor <= 3/4 */
 	while (cap < 4u * ntri)
 		cap *= 2;
-	m->stage = stage;
+	m->s = s;
 	m->mask = cap - 1;
-	m->slot = rad_mem_alloc(mem, RAD_MEM_SCRATCH, (size_t)cap * 4);
+	m->slot = rad_mem_alloc(&s->mem, RAD_MEM_SCRATCH, (size_t)cap * 4);
 	if (!m->slot)
 		return RAD_ERR_NOMEM;
 	memset(m->slot, 0xff, (size_t)cap * 4);
 	for (uint32_t t = 0; t < ntri; t++) {
 		for (int k = 0; k < 3; k++) {
-			uint32_t *slot =
-			        edge_probe(m, stage_vertex(stage, t, k),
-			                   stage_vertex(stage, t, k + 1));
+			uint32_t *slot = edge_probe(m, tri_vertex(s, t, k),
+			                            tri_vertex(s, t, k + 1));
 			/* A repeated directed edge (non-manifold or
 			 * duplicate geometry): the first keeps it. */
 			if (*slot == RAD_NONE)
@@ -100,7 +95,7 @@ static rad_status edge_map_build(edge_map *m, rad_mem *mem, const float *stage,
  * Can triangle t, seen as (a, b, c) with b -> c its edge k and a the
  * opposite corner, pair with u, which holds c -> b with opposite corner d, into
  * the parallelogram a, b, d, c?  Closure d = b + c - a is checked relative to
- * the longest edge, plus the rounding the staged floats carry.
+ * the longest edge, plus the rounding the float vertices carry.
  */
 static int forms_parallelogram(const rad_scene *s, uint32_t t, int k,
                                uint32_t u, int j)
@@ -111,10 +106,10 @@ static int forms_parallelogram(const rad_scene *s, uint32_t t, int k,
 		return 0;
 	if (v3_dot(v3_f(pt->n), v3_f(pu->n)) < 1.0 - MERGE_COPLANAR)
 		return 0;
-	v3 a = v3_f(stage_vertex(s->stage, t, k + 2));
-	v3 b = v3_f(stage_vertex(s->stage, t, k));
-	v3 c = v3_f(stage_vertex(s->stage, t, k + 1));
-	v3 d = v3_f(stage_vertex(s->stage, u, j + 2));
+	v3 a = v3_f(rad_scene_vert(s, tri_vertex(s, t, k + 2)));
+	v3 b = v3_f(rad_scene_vert(s, tri_vertex(s, t, k)));
+	v3 c = v3_f(rad_scene_vert(s, tri_vertex(s, t, k + 1)));
+	v3 d = v3_f(rad_scene_vert(s, tri_vertex(s, u, j + 2)));
 	double lmax = fmax(v3_len(v3_sub(b, a)), v3_len(v3_sub(c, a)));
 	double cmax = 0;
 	const v3 pts[4] = {a, b, c, d};
@@ -147,28 +142,31 @@ static rad_status quad_material(rad_scene *s, uint32_t t, uint32_t u,
 	return rad_scene_material_id(s, &m, &pt->mat, err);
 }
 
-/* Rewrite triangle t as the parallelogram with corner a (opposite edge k). */
-static void make_quad(rad_scene *s, uint32_t t, int k)
+/* Rewrite triangle t as the parallelogram with corner a (opposite its
+ * edge k) and, opposite a, corner j + 2 of triangle u. */
+static void make_quad(rad_scene *s, uint32_t t, int k, uint32_t u, int j)
 {
 	rad_poly *p = &s->polys[t];
-	v3 a = v3_f(stage_vertex(s->stage, t, k + 2));
-	v3 e1 = v3_sub(v3_f(stage_vertex(s->stage, t, k)), a);
-	v3 e2 = v3_sub(v3_f(stage_vertex(s->stage, t, k + 1)), a);
-	v3_store_f(p->p0, a);
-	v3_store_f(p->e1, e1);
-	v3_store_f(p->e2, e2);
-	p->area = (float)v3_len(v3_cross(v3_f(p->e1), v3_f(p->e2)));
+	uint32_t a = tri_vertex(s, t, k + 2), b = tri_vertex(s, t, k),
+	         c = tri_vertex(s, t, k + 1), d = tri_vertex(s, u, j + 2);
+	p->v[0] = a;
+	p->v[1] = b;
+	p->v[2] = d;
+	p->v[3] = c;
+	p->area = (float)v3_len(v3_cross(rad_poly_e1(s, p), rad_poly_e2(s, p)));
 	p->quad = 1;
 }
 
 /* Edges of t, longest first: the diagonal of a cell is tried first. */
-static void edges_by_length(const float *stage, uint32_t t, int order[3])
+static void edges_by_length(const rad_scene *s, uint32_t t, int order[3])
 {
 	double len[3];
 	for (int k = 0; k < 3; k++) {
+		float e[3];
+		rad_scene_edge(s, tri_vertex(s, t, k), tri_vertex(s, t, k + 1),
+		               e);
 		order[k] = k;
-		len[k] = v3_len(v3_sub(v3_f(stage_vertex(stage, t, k + 1)),
-		                       v3_f(stage_vertex(stage, t, k))));
+		len[k] = v3_len(v3_f(e));
 	}
 	for (int i = 1; i < 3; i++)
 		for (int j = i; j > 0 && len[order[j]] > len[order[j - 1]];
@@ -196,16 +194,15 @@ static int duplicate_of_earlier(const rad_scene *s, const edge_map *m,
                                 uint32_t t)
 {
 	for (int k = 0; k < 3; k++) {
-		uint32_t e = *edge_probe(m, stage_vertex(s->stage, t, k),
-		                         stage_vertex(s->stage, t, k + 1));
+		uint32_t e = *edge_probe(m, tri_vertex(s, t, k),
+		                         tri_vertex(s, t, k + 1));
 		uint32_t u = e / 3;
 		if (e == RAD_NONE || u >= t)
 			continue;
 		int du = (int)(e % 3) - k, same = 1;
 		for (int i = 0; i < 3; i++)
-			same &= same_point(
-			        stage_vertex(s->stage, t, i),
-			        stage_vertex(s->stage, u, i + du + 3));
+			same &= tri_vertex(s, t, i) ==
+			        tri_vertex(s, u, i + du + 3);
 		if (same)
 			return 1;
 	}
@@ -217,11 +214,11 @@ static rad_status pair_triangle(rad_scene *s, const edge_map *m, uint8_t *pair,
                                 uint32_t t, rad_error *err)
 {
 	int order[3];
-	edges_by_length(s->stage, t, order);
+	edges_by_length(s, t, order);
 	for (int i = 0; i < 3; i++) {
 		int k = order[i];
-		uint32_t e = *edge_probe(m, stage_vertex(s->stage, t, k + 1),
-		                         stage_vertex(s->stage, t, k));
+		uint32_t e = *edge_probe(m, tri_vertex(s, t, k + 1),
+		                         tri_vertex(s, t, k));
 		if (e == RAD_NONE || e / 3 == t || pair[e / 3] != PAIR_NONE)
 			continue;
 		uint32_t u = e / 3;
@@ -230,7 +227,7 @@ static rad_status pair_triangle(rad_scene *s, const edge_map *m, uint8_t *pair,
 		rad_status st = quad_material(s, t, u, err);
 		if (st)
 			return st;
-		make_quad(s, t, k);
+		make_quad(s, t, k, u, (int)(e % 3));
 		pair[t] = PAIR_QUAD;
 		pair[u] = PAIR_ABSORBED;
 		return RAD_OK;
@@ -276,7 +273,7 @@ static rad_status merge_quads(rad_scene *s, rad_error *err)
 {
 	edge_map m;
 	uint8_t *pair = rad_mem_calloc(&s->mem, RAD_MEM_SCRATCH, s->npolys, 1);
-	if (!pair || edge_map_build(&m, &s->mem, s->stage, s->npolys)) {
+	if (!pair || edge_map_build(&m, s)) {
 		rad_mem_free(&s->mem, RAD_MEM_SCRATCH, pair);
 		return rad_fail(err, RAD_ERR_NOMEM,
 		                "commit: out of memory "
@@ -304,8 +301,7 @@ static rad_status merge_quads(rad_scene *s, rad_error *err)
 	s->npolys = n;
 	rad_mem_free(&s->mem, RAD_MEM_SCRATCH, m.slot);
 	rad_mem_free(&s->mem, RAD_MEM_SCRATCH, pair);
-	rad_mem_free(&s->mem, RAD_MEM_GEOMETRY, s->stage);
-	s->stage = NULL;
+	s->merged = 1;
 	rad_scene_fit_polys(s);
 	rad_scene_material_index_free(s);
 	if (!s->stage_base)
@@ -319,9 +315,9 @@ static rad_status merge_quads(rad_scene *s, rad_error *err)
 
 /*
  * The back face of each two-sided polygon: the same sheet turned over (e1
- * and e2 swapped, the normal negated), appended after every polygon the
- * BVH holds.  Both faces are polygons to the solvers, each with its own
- * elements and radiosity; the sheet is in the BVH once, and s->twin leads
+ * and e2 swapped, the normal negated, the same vertices), appended after every
+ * polygon the BVH holds.  Both faces are polygons to the solvers, each with its
+ * own elements and radiosity; the sheet is in the BVH once, and s->twin leads
  * a hit from behind to the back face.
  */
 static rad_status make_back_faces(rad_scene *s, rad_error *err)
@@ -354,8 +350,14 @@ static rad_status make_back_faces(rad_scene *s, rad_error *err)
 		if (polys[i].side != RAD_SIDE_FRONT)
 			continue;
 		rad_poly b = polys[i];
-		memcpy(b.e1, polys[i].e2, sizeof(b.e1));
-		memcpy(b.e2, polys[i].e1, sizeof(b.e2));
+		/* e1 and e2 swapped: the corners in the other turn. */
+		if (b.quad) {
+			b.v[1] = polys[i].v[3];
+			b.v[3] = polys[i].v[1];
+		} else {
+			b.v[1] = polys[i].v[2];
+			b.v[2] = b.v[3] = polys[i].v[1];
+		}
 		for (int c = 0; c < 3; c++)
 			b.n[c] = -b.n[c];
 		b.side = RAD_SIDE_BACK;
@@ -387,7 +389,7 @@ static void compute_bounds(rad_scene *s)
 	}
 	for (uint32_t i = 0; i < s->npolys; i++) {
 		v3 v[4];
-		int nv = rad_poly_corners(&s->polys[i], v);
+		int nv = rad_poly_corners(s, &s->polys[i], v);
 		for (int k = 0; k < nv; k++)
 			grow_bounds(s, v[k]);
 	}
@@ -467,14 +469,18 @@ rad_status rad_scene_commit(rad_scene *s, rad_error *err)
 		                s->counts.triangles_in,
 		                s->counts.triangles_nonfinite,
 		                s->counts.triangles_degenerate);
-	if (s->stage && (st = merge_quads(s, err)))
+	if (!s->merged && (st = merge_quads(s, err)))
 		return st;
 	compute_bounds(s);
 	/* A commit retried after the BVH failed has done these already. */
 	if (!s->twin && (st = rad_scene_conform(s, err)))
 		return st;
-	if (!s->twin && (st = make_back_faces(s, err)))
-		return st;
+	if (!s->twin) {
+		s->nfront = s->npolys;
+		if ((st = make_back_faces(s, err)))
+			return st;
+	}
+	rad_scene_vertex_index_free(s);
 	compute_totals(s);
 	if ((st = rad_vis_build(s, err)))
 		return st;
@@ -491,7 +497,8 @@ void rad_scene_free(rad_scene *s)
 		return;
 	rad_vis_free(s);
 	rad_mem_free(&s->mem, RAD_MEM_GEOMETRY, s->polys);
-	rad_mem_free(&s->mem, RAD_MEM_GEOMETRY, s->stage);
+	rad_mem_free(&s->mem, RAD_MEM_GEOMETRY, s->verts);
+	rad_mem_free(&s->mem, RAD_MEM_GEOMETRY, s->vert_slots);
 	rad_mem_free(&s->mem, RAD_MEM_GEOMETRY, s->stage_base);
 	rad_mem_free(&s->mem, RAD_MEM_GEOMETRY, s->twin);
 	rad_mem_free(&s->mem, RAD_MEM_MATERIALS, s->mats);

@@ -67,11 +67,11 @@ static double piece_area(const piece *pc, v3 n)
  * its ends in a, b.  0 if q does not reach the plane from both sides (or
  * touch it along an edge), or lies in it.
  */
-static int plane_segment(const rad_poly *q, v3 o, v3 n, double tol, v3 *a,
-                         v3 *b)
+static int plane_segment(const rad_scene *s, const rad_poly *q, v3 o, v3 n,
+                         double tol, v3 *a, v3 *b)
 {
 	v3 v[4];
-	int nv = rad_poly_corners(q, v), on = 0, above = 0, below = 0, m = 0;
+	int nv = rad_poly_corners(s, q, v), on = 0, above = 0, below = 0, m = 0;
 	double d[4];
 	v3 pts[8];
 	for (int i = 0; i < nv; i++) {
@@ -176,10 +176,11 @@ static int cut_piece(const piece *pc, v3 n, v3 a, v3 b, int anchored,
 }
 
 /* Polygon p's bounding box, grown by tol. */
-static void poly_box(const rad_poly *p, double tol, float box[6])
+static void poly_box(const rad_scene *s, const rad_poly *p, double tol,
+                     float box[6])
 {
 	v3 v[4];
-	int nv = rad_poly_corners(p, v);
+	int nv = rad_poly_corners(s, p, v);
 	double lo[3] = {INFINITY, INFINITY, INFINITY};
 	double hi[3] = {-INFINITY, -INFINITY, -INFINITY};
 	for (int i = 0; i < nv; i++) {
@@ -204,10 +205,10 @@ static int boxes_meet(const float *a, const float *b)
 }
 
 /* 1 if x (in polygon p's plane) lies strictly inside p, by more than tol. */
-static int inside_poly(const rad_poly *p, v3 x, double tol)
+static int inside_poly(const rad_scene *s, const rad_poly *p, v3 x, double tol)
 {
 	v3 v[4], n = v3_f(p->n);
-	int nv = rad_poly_corners(p, v);
+	int nv = rad_poly_corners(s, p, v);
 	for (int i = 0; i < nv; i++) {
 		v3 e = v3_sub(v[(i + 1) % nv], v[i]);
 		v3 in = v3_norm(v3_cross(n, e)); /* points inwards */
@@ -249,7 +250,7 @@ static int cut_polygon(const rad_scene *s, uint32_t i, const float *boxes,
                        seg *segs)
 {
 	const rad_poly *p = &s->polys[i];
-	v3 n = v3_f(p->n), o = rad_poly_point(p, 0, 0);
+	v3 n = v3_f(p->n), o = rad_scene_vertex(s, p->v[0]);
 	double min_area = MIN_PIECE * p->area;
 	double wall = fmax(large, ANCHOR_SHARE * p->area);
 	int ns = 0;
@@ -262,17 +263,17 @@ static int cut_polygon(const rad_scene *s, uint32_t i, const float *boxes,
 			    !boxes_meet(boxes + 6 * (size_t)i,
 			                boxes + 6 * (size_t)j))
 				continue;
-			if (plane_segment(&s->polys[j], o, n, tol, &segs[ns].a,
-			                  &segs[ns].b))
+			if (plane_segment(s, &s->polys[j], o, n, tol,
+			                  &segs[ns].a, &segs[ns].b))
 				segs[ns++].large = is_wall;
 		}
 	int np = 1;
-	out[0].n = rad_poly_corners(p, out[0].v);
+	out[0].n = rad_poly_corners(s, p, out[0].v);
 	for (int k = 0; k < ns; k++) {
 		int anchored = segs[k].large;
 		for (int e = 0; e < 2 && anchored; e++) {
 			v3 x = e ? segs[k].b : segs[k].a;
-			if (!inside_poly(p, x, tol))
+			if (!inside_poly(s, p, x, tol))
 				continue;
 			int met = 0;
 			for (int m = 0; m < ns && !met; m++)
@@ -301,35 +302,52 @@ static int is_parallelogram(const piece *pc, double tol)
 }
 
 /*
- * Store q's edges e1, e2 from origin o and check them as the scene builder
- * checks an input triangle: no sliver (SLIVER_REL), and the float edges
- * must still give the normal n (rad_poly_check_stored).
+ * Store q as the polygon with corners c (3, or 4 for a parallelogram),
+ * checked as the scene builder checks an input triangle: no sliver
+ * (SLIVER_REL), and the float edges must still give the normal n
+ * (rad_poly_check_edges).  1 if stored, 0 if it would be degenerate, -1
+ * if out of memory for its vertices.
  */
-static int set_edges(rad_poly *q, v3 o, v3 e1, v3 e2, int quad, v3 n)
+static int set_corners(rad_scene *s, rad_poly *q, const v3 *c, int quad, v3 n)
 {
+	int nc = quad ? 4 : 3;
+	v3 e1 = v3_sub(c[1], c[0]), e2 = v3_sub(c[nc - 1], c[0]);
 	double lmax2 = fmax(v3_dot(e1, e1), v3_dot(e2, e2));
 	double area = v3_dot(v3_cross(e1, e2), n) * (quad ? 1 : 0.5);
-	v3_store_f(q->p0, o);
-	v3_store_f(q->e1, e1);
-	v3_store_f(q->e2, e2);
+	float f[4][3], e1f[3], e2f[3];
+	for (int k = 0; k < nc; k++) {
+		v3_store_f(f[k], v3_sub(c[k], v3_d(s->origin)));
+		for (int i = 0; i < 3; i++)
+			f[k][i] += 0.0f; /* exact vertex keys (scene.c) */
+	}
+	for (int i = 0; i < 3; i++) {
+		e1f[i] = f[1][i] - f[0][i];
+		e2f[i] = f[nc - 1][i] - f[0][i];
+	}
+	if (!(area > SLIVER_REL * lmax2) ||
+	    rad_poly_check_edges(e1f, e2f, area, n) != RAD_POLY_OK)
+		return 0;
+	for (int k = 0; k < nc; k++)
+		if (rad_scene_vertex_id(s, f[k], &q->v[k], NULL))
+			return -1;
+	if (!quad)
+		q->v[3] = q->v[2];
 	q->area = (float)area;
 	q->quad = (uint8_t)quad;
-	return area > SLIVER_REL * lmax2 &&
-	       rad_poly_check_stored(q, area, n) == RAD_POLY_OK;
+	return 1;
 }
 
 /* Store piece pc of polygon p (its material, node, normal) at out:
- * returns the polygons made, or -1 if one would be degenerate. */
-static int emit_piece(const rad_poly *p, const piece *pc, double tol,
-                      rad_poly *out)
+ * returns the polygons made, -1 if one would be degenerate, -2 if out of
+ * memory. */
+static int emit_piece(rad_scene *s, const rad_poly *p, const piece *pc,
+                      double tol, rad_poly *out)
 {
 	v3 n = v3_f(p->n);
 	if (is_parallelogram(pc, tol)) {
 		out[0] = *p;
-		return set_edges(&out[0], pc->v[0], v3_sub(pc->v[1], pc->v[0]),
-		                 v3_sub(pc->v[3], pc->v[0]), 1, n)
-		               ? 1
-		               : -1;
+		int r = set_corners(s, &out[0], pc->v, 1, n);
+		return r == 1 ? 1 : r == 0 ? -1 : -2;
 	}
 	int m = 0;
 	for (int k = 1; k + 1 < pc->n; k++) {
@@ -338,8 +356,10 @@ static int emit_piece(const rad_poly *p, const piece *pc, double tol,
 		if (!(v3_len(v3_cross(e1, e2)) > tol * v3_len(v3_sub(e2, e1))))
 			continue; /* a vertex on the line of its neighbours */
 		out[m] = *p;
-		if (!set_edges(&out[m], pc->v[0], e1, e2, 0, n))
-			return -1;
+		const v3 c[3] = {pc->v[0], pc->v[k], pc->v[k + 1]};
+		int r = set_corners(s, &out[m], c, 0, n);
+		if (r != 1)
+			return r == 0 ? -1 : -2;
 		m++;
 	}
 	return m;
@@ -370,7 +390,7 @@ rad_status rad_scene_conform(rad_scene *s, rad_error *err)
 	uint32_t n = 0, cut = 0;
 	int ok = boxes && pcs && segs && polys;
 	for (uint32_t i = 0; ok && i < s->npolys; i++)
-		poly_box(&s->polys[i], tol, boxes + 6 * (size_t)i);
+		poly_box(s, &s->polys[i], tol, boxes + 6 * (size_t)i);
 	for (uint32_t i = 0; ok && i < s->npolys; i++) {
 		const rad_poly *p = &s->polys[i];
 		int np = p->area >= large ? cut_polygon(s, i, boxes, large, tol,
@@ -392,11 +412,16 @@ rad_status rad_scene_conform(rad_scene *s, rad_error *err)
 		}
 		polys = grown;
 		uint32_t made = 0;
-		for (int k = 0; k < np && made != UINT32_MAX; k++) {
-			int m = emit_piece(p, &pcs[k], tol, polys + n + made);
-			made = m < 0 ? UINT32_MAX : made + (uint32_t)m;
+		int m = 0;
+		for (int k = 0; k < np && m >= 0; k++) {
+			m = emit_piece(s, p, &pcs[k], tol, polys + n + made);
+			made += m > 0 ? (uint32_t)m : 0;
 		}
-		if (made == UINT32_MAX) { /* a piece would be degenerate */
+		if (m == -2) {
+			ok = 0;
+			break;
+		}
+		if (m == -1) { /* a piece would be degenerate */
 			polys[n++] = *p;
 			continue;
 		}

@@ -61,9 +61,11 @@ void rad_patch_from_floats(rad_patch *p, const float p0[3], const float e1[3],
 	p->quad = quad;
 }
 
-void rad_patch_from_poly(rad_patch *p, const rad_poly *poly)
+void rad_patch_from_poly(rad_patch *p, const rad_scene *s, const rad_poly *poly)
 {
-	rad_patch_from_floats(p, poly->p0, poly->e1, poly->e2, poly->quad);
+	float p0[3], e1[3], e2[3];
+	rad_poly_frame(s, poly, p0, e1, e2);
+	rad_patch_from_floats(p, p0, e1, e2, poly->quad);
 }
 
 v3 rad_patch_centroid(const rad_patch *p)

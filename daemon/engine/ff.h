@@ -30,7 +30,8 @@ typedef struct rad_patch {
 
 #define RAD_FF_MAX_SAMPLES 16
 
-void rad_patch_from_poly(rad_patch *p, const rad_poly *poly);
+void rad_patch_from_poly(rad_patch *p, const rad_scene *s,
+                         const rad_poly *poly);
 void rad_patch_from_floats(rad_patch *p, const float p0[3], const float e1[3],
                            const float e2[3], int quad);
 v3 rad_patch_centroid(const rad_patch *p);

@@ -18,18 +18,19 @@
 #include "rad.h"
 #include "vis.h"
 
-static v3 poly_centroid(const rad_poly *p)
+static v3 poly_centroid(const rad_scene *s, const rad_poly *p)
 {
 	/* Triangle: (p0 + p1 + p2)/3; parallelogram: p0 + (e1 + e2)/2. */
 	double w = p->quad ? 0.5 : 1.0 / 3.0;
-	return v3_madd(v3_madd(v3_f(p->p0), v3_f(p->e1), w), v3_f(p->e2), w);
+	return rad_poly_point(s, p, w, w);
 }
 
-static void poly_bounds(const rad_poly *p, float lo[3], float hi[3])
+static void poly_bounds(const rad_scene *s, const rad_poly *p, float lo[3],
+                        float hi[3])
 {
-	v3 a = v3_f(p->p0), b = v3_add(a, v3_f(p->e1)),
-	   c = v3_add(a, v3_f(p->e2));
-	v3 d = v3_add(b, v3_f(p->e2));
+	v3 e2 = rad_poly_e2(s, p), a = rad_scene_vertex(s, p->v[0]);
+	v3 b = v3_add(a, rad_poly_e1(s, p)), c = v3_add(a, e2);
+	v3 d = v3_add(b, e2);
 	v3 pts[4] = {a, b, c, d};
 	int n = p->quad ? 4 : 3;
 	for (int i = 0; i < n; i++) {
@@ -56,13 +57,13 @@ static void select_kth(const rad_scene *s, uint32_t *order, uint32_t lo,
 	while (hi - lo > 1) {
 		uint32_t mid = lo + (hi - lo) / 2;
 		uint32_t pivot = order[mid];
-		double pk = axis_of(poly_centroid(&s->polys[pivot]), axis);
+		double pk = axis_of(poly_centroid(s, &s->polys[pivot]), axis);
 		/* Three-way partition around (pk, pivot id). */
 		uint32_t lt = lo, i = lo, gt = hi;
 		while (i < gt) {
 			uint32_t id = order[i];
 			double key =
-			        axis_of(poly_centroid(&s->polys[id]), axis);
+			        axis_of(poly_centroid(s, &s->polys[id]), axis);
 			int cmp = key < pk   ? -1
 			          : key > pk ? 1
 			                     : (id < pivot ? -1 : id > pivot);
@@ -185,12 +186,12 @@ static rad_status build_cluster(rad_hier *h, uint32_t c, rad_error *err)
 	double chi[3] = {-DBL_MAX, -DBL_MAX, -DBL_MAX};
 	for (uint32_t i = cl->first; i < cl->first + cl->count; i++) {
 		const rad_poly *p = &s->polys[h->order[i]];
-		poly_bounds(p, cl->lo, cl->hi);
+		poly_bounds(s, p, cl->lo, cl->hi);
 		area += p->area;
 		for (int k = 0; k < 3; k++)
 			n[k] += (double)p->area * p->n[k];
 		moments_add(m, p->area, p->n);
-		v3 ctr = poly_centroid(p);
+		v3 ctr = poly_centroid(s, p);
 		double q[3] = {ctr.x, ctr.y, ctr.z};
 		for (int k = 0; k < 3; k++) {
 			clo[k] = q[k] < clo[k] ? q[k] : clo[k];
@@ -332,9 +333,9 @@ void rad_hier_destroy(rad_hier *h)
 	h->order = NULL;
 }
 
-static double poly_edge(const rad_poly *p)
+static double poly_edge(const rad_scene *s, const rad_poly *p)
 {
-	v3 a = v3_f(p->e1), b = v3_f(p->e2);
+	v3 a = rad_poly_e1(s, p), b = rad_poly_e2(s, p);
 	/* The third edge: e2 - e1 (triangle) or the diagonal's sides. */
 	double l = fmax(v3_len(a), v3_len(b));
 	if (!p->quad)
@@ -345,7 +346,8 @@ static double poly_edge(const rad_poly *p)
 double rad_elem_edge(const rad_hier *h, const rad_elem *e)
 {
 	/* Halving a float vector is exact, and so is its length's half. */
-	return ldexp(poly_edge(&h->scene->polys[e->poly]), -(int)e->level);
+	return ldexp(poly_edge(h->scene, &h->scene->polys[e->poly]),
+	             -(int)e->level);
 }
 
 int rad_elem_can_split(const rad_hier *h, const rad_elem *e)
@@ -378,9 +380,7 @@ void rad_elem_region(const rad_hier *h, const rad_elem *e, float p0[3],
                      float e1[3], float e2[3])
 {
 	const rad_poly *p = &h->scene->polys[e->poly];
-	memcpy(p0, p->p0, sizeof(p->p0));
-	memcpy(e1, p->e1, sizeof(p->e1));
-	memcpy(e2, p->e2, sizeof(p->e2));
+	rad_poly_frame(h->scene, p, p0, e1, e2);
 	for (int l = 0; l < e->level; l++)
 		rad_region_quarter(p0, e1, e2, p->quad,
 		                   (int)(e->path >> (2 * l)) & 3);

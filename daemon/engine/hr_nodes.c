@@ -309,7 +309,7 @@ static int node_points(const rad_hier *h, uint32_t t, int n, int source,
 			uint32_t j = rad_cluster_pick(h, c, (uint32_t)k,
 			                              (uint32_t)m);
 			rad_patch p;
-			rad_patch_from_poly(&p, &h->scene->polys[j]);
+			rad_patch_from_poly(&p, h->scene, &h->scene->polys[j]);
 			pts[kept] = rad_patch_centroid(&p);
 			nrm[kept] = p.n;
 			if (source &&

@@ -299,15 +299,13 @@ static void gather_poly(gather *g, uint32_t pid)
 	const rad_material *m = &s->mats[poly->mat];
 	double e = rad_luma(m->emit);
 	region root;
-	memcpy(root.p0, poly->p0, sizeof(root.p0));
-	memcpy(root.e1, poly->e1, sizeof(root.e1));
-	memcpy(root.e2, poly->e2, sizeof(root.e2));
+	rad_poly_frame(s, poly, root.p0, root.e1, root.e2);
 	if (e <= 0) {
 		gather_elem(g, pid, &root, none, -1, NULL);
 		return;
 	}
 	rad_patch p;
-	rad_patch_from_poly(&p, poly);
+	rad_patch_from_poly(&p, s, poly);
 	double F = rad_ff_point_patch(g->x, g->n, &p);
 	ray_memo memo;
 	memo.n = 0;
@@ -372,7 +370,7 @@ static double cluster_seen(const gather *g, const rad_cluster *c)
 			const rad_poly *p =
 			        &sc->polys[rad_cluster_pick(g->h, c, k, look)];
 			rad_patch pa;
-			rad_patch_from_poly(&pa, p);
+			rad_patch_from_poly(&pa, sc, p);
 			v3 yc = rad_patch_centroid(&pa);
 			double f = v3_dot(pa.n, v3_sub(g->x, yc));
 			if (pass == 0 && !(f > 0))

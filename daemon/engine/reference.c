@@ -192,12 +192,13 @@ static double emitter_pdf_area(const tracer *tr, const rad_poly *p)
 }
 
 /* Uniform point on a polygon (triangle: the square-root warp). */
-static v3 poly_sample(const rad_poly *p, double u1, double u2)
+static v3 poly_sample(const rad_scene *s, const rad_poly *p, double u1,
+                      double u2)
 {
 	if (p->quad)
-		return rad_poly_point(p, u1, u2);
+		return rad_poly_point(s, p, u1, u2);
 	double r = sqrt(u1);
-	return rad_poly_point(p, r * (1.0 - u2), r * u2);
+	return rad_poly_point(s, p, r * (1.0 - u2), r * u2);
 }
 
 /* Cosine-weighted direction around unit n (Duff et al.'s basis). */
@@ -349,7 +350,7 @@ static void nee_emitter(const tracer *tr, const vertex *v, const double *beta,
 	const rad_poly *p =
 	        &tr->s->polys[em->poly[emitters_pick(em, rng_next(r))]];
 	double u1 = rng_next(r), u2 = rng_next(r);
-	v3 y = poly_sample(p, u1, u2), ny = v3_f(p->n);
+	v3 y = poly_sample(tr->s, p, u1, u2), ny = v3_f(p->n);
 	v3 d = v3_sub(y, v->x);
 	double r2 = v3_dot(d, d);
 	if (!(r2 > 0))

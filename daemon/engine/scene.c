@@ -10,12 +10,14 @@
  * Bad materials, lights and ids are refused: they are authoring errors.
  *
  * DESIGN
- * - A triangle is stored at once as a rad_poly whose edges are computed
- *   in double from the input and then rounded, so the stored shape is
- *   accurate even far from the origin.  The float-rounded input vertices
- *   are kept beside it (s->stage) until commit: shared vertices of a mesh
- *   round to bit-identical floats, which lets the merger find shared edges
- *   by exact key instead of by a tolerance search.
+ * - A triangle is stored at once as a rad_poly: its corners are vertex
+ *   ids, each distinct float point stored once (rad_scene_vertex_id), so
+ *   the shared vertices of a mesh are one vertex and the merger finds
+ *   shared edges by id.  Vertices are relative to the first corner
+ *   offered (s->origin), so a scene far from the origin keeps its edges,
+ *   the float differences of its corners, as exact as one near it.  The
+ *   normal and area are computed in double from the input, and the float
+ *   edges must agree with them (rad_poly_check_edges).
  * - The rad_scene struct itself is allocated with plain calloc and is not
  *   counted: it holds the counters, so counting it would leave the report
  *   non-zero at the moment the last counted byte goes away.  Everything it
@@ -117,7 +119,8 @@ static int same_material(const rad_material *a, const rad_material *b)
 
 static uint32_t material_hash(const rad_material *m)
 {
-	return rad_hash_floats6(m->rho, m->emit);
+	return rad_hash_end(rad_hash_words(
+	        rad_hash_words(RAD_HASH_SEED, m->rho, 3), m->emit, 3));
 }
 
 static void material_index_put(rad_scene *s, uint32_t id)
@@ -237,23 +240,120 @@ rad_status rad_scene_add_node(rad_scene *s, const char *name, uint32_t *id,
 
 /* ------------------------------------------------------------- triangles */
 
+/* ------------------------------------------------------------- vertices */
+
+static uint32_t vertex_hash(const float x[3])
+{
+	return rad_hash_end(rad_hash_words(RAD_HASH_SEED, x, 3));
+}
+
+/* A hash at most half full with room for one more vertex; 0 if out of
+ * memory.  Built again from the vertices when it has gone (a commit
+ * retried after the hash was freed). */
+static int vertex_index_fit(rad_scene *s)
+{
+	size_t need = 2 * ((size_t)s->nverts + 1);
+	if (s->vert_slots && need <= (size_t)s->vert_mask + 1)
+		return 1;
+	size_t cap = 1024;
+	while (cap < need)
+		cap *= 2;
+	uint32_t *slots =
+	        rad_mem_calloc(&s->mem, RAD_MEM_GEOMETRY, cap, sizeof(*slots));
+	if (!slots)
+		return 0;
+	rad_mem_free(&s->mem, RAD_MEM_GEOMETRY, s->vert_slots);
+	s->vert_slots = slots;
+	s->vert_mask = (uint32_t)(cap - 1);
+	for (uint32_t id = 0; id < s->nverts; id++) {
+		uint32_t i = vertex_hash(rad_scene_vert(s, id)) & s->vert_mask;
+		while (slots[i])
+			i = (i + 1) & s->vert_mask;
+		slots[i] = id + 1;
+	}
+	return 1;
+}
+
+rad_status rad_scene_vertex_id(rad_scene *s, const float x[3], uint32_t *id,
+                               rad_error *err)
+{
+	if (!vertex_index_fit(s))
+		return rad_fail(err, RAD_ERR_NOMEM,
+		                "vertices: out of memory (%u vertices)",
+		                s->nverts);
+	uint32_t i = vertex_hash(x) & s->vert_mask;
+	for (; s->vert_slots[i]; i = (i + 1) & s->vert_mask) {
+		uint32_t v = s->vert_slots[i] - 1;
+		if (memcmp(rad_scene_vert(s, v), x, 3 * sizeof(float)) == 0) {
+			*id = v;
+			return RAD_OK;
+		}
+	}
+	if (s->nverts >= MAX_IDS)
+		return rad_fail(err, RAD_ERR_LIMIT, "vertices: more than %u",
+		                MAX_IDS);
+	if (s->nverts == s->cap_verts) {
+		uint32_t cap = s->cap_verts ? 2 * s->cap_verts : 1024;
+		float *v = rad_mem_realloc(&s->mem, RAD_MEM_GEOMETRY, s->verts,
+		                           (3 * (size_t)cap + RAD_VERT_PAD) *
+		                                   sizeof(float));
+		if (!v)
+			return rad_fail(err, RAD_ERR_NOMEM,
+			                "vertices: out of memory (%u vertices)",
+			                s->nverts);
+		s->verts = v;
+		s->cap_verts = cap;
+	}
+	memcpy(s->verts + 3 * (size_t)s->nverts, x, 3 * sizeof(float));
+	s->vert_slots[i] = s->nverts + 1;
+	*id = s->nverts++;
+	return RAD_OK;
+}
+
+void rad_scene_vertex_index_free(rad_scene *s)
+{
+	rad_mem_free(&s->mem, RAD_MEM_GEOMETRY, s->vert_slots);
+	s->vert_slots = NULL;
+	s->vert_mask = 0;
+	/* Fit the array (keeping the old block if that fails is harmless)
+	 * and zero the pad Embree reads past the last vertex. */
+	size_t n = 3 * (size_t)s->nverts + RAD_VERT_PAD;
+	float *v = rad_mem_realloc(&s->mem, RAD_MEM_GEOMETRY, s->verts,
+	                           n * sizeof(float));
+	if (v) {
+		s->verts = v;
+		s->cap_verts = s->nverts;
+	}
+	if (s->verts)
+		memset(s->verts + 3 * (size_t)s->nverts, 0,
+		       RAD_VERT_PAD * sizeof(float));
+}
+
+/* ------------------------------------------------------------ triangles */
+
 /*
- * Turn one input triangle into a stored polygon and its staged vertices.
- * Coordinates beyond float range count as non-finite: they would be
- * infinite once stored.
+ * Turn one input triangle into a stored polygon, but for its corners'
+ * vertex ids: the corners rounded to float relative to s->origin go to
+ * f (the first triangle sets the origin).  Coordinates beyond float range
+ * count as non-finite: they would be infinite once stored.
  */
-static enum rad_poly_verdict make_triangle(const double *xyz, rad_poly *p,
-                                           float stage[9])
+static enum rad_poly_verdict make_triangle(rad_scene *s, const double *xyz,
+                                           rad_poly *p, float f[9])
 {
 	v3 v[3];
+	for (int k = 0; k < 9; k++)
+		if (!(fabs(xyz[k]) <= FLT_MAX))
+			return RAD_POLY_NONFINITE;
+	if (s->nverts == 0)
+		memcpy(s->origin, xyz, sizeof(s->origin));
 	for (int k = 0; k < 3; k++) {
 		v[k] = v3_d(xyz + 3 * k);
 		for (int c = 0; c < 3; c++) {
-			double x = xyz[3 * k + c];
-			if (!(fabs(x) <= FLT_MAX))
+			/* + 0.0f turns -0 into +0 for exact vertex keys. */
+			f[3 * k + c] =
+			        (float)(xyz[3 * k + c] - s->origin[c]) + 0.0f;
+			if (!isfinite(f[3 * k + c]))
 				return RAD_POLY_NONFINITE;
-			/* + 0.0f turns -0 into +0 for exact edge keys. */
-			stage[3 * k + c] = (float)x + 0.0f;
 		}
 	}
 	v3 e1 = v3_sub(v[1], v[0]), e2 = v3_sub(v[2], v[0]);
@@ -264,11 +364,13 @@ static enum rad_poly_verdict make_triangle(const double *xyz, rad_poly *p,
 	double area = 0.5 * v3_len(c);
 	if (!(area > SLIVER_REL * lmax2))
 		return RAD_POLY_DEGENERATE;
-	v3_store_f(p->p0, v[0]);
-	v3_store_f(p->e1, e1);
-	v3_store_f(p->e2, e2);
+	float e1f[3], e2f[3];
+	for (int k = 0; k < 3; k++) {
+		e1f[k] = f[3 + k] - f[k];
+		e2f[k] = f[6 + k] - f[k];
+	}
 	v3 n = v3_scale(c, 0.5 / area);
-	enum rad_poly_verdict verdict = rad_poly_check_stored(p, area, n);
+	enum rad_poly_verdict verdict = rad_poly_check_edges(e1f, e2f, area, n);
 	if (verdict != RAD_POLY_OK)
 		return verdict;
 	v3_store_f(p->n, n);
@@ -277,8 +379,7 @@ static enum rad_poly_verdict make_triangle(const double *xyz, rad_poly *p,
 	return RAD_POLY_OK;
 }
 
-/* Room for ntri more polygons; the stage array always has the capacity of
- * the polygon array. */
+/* Room for ntri more polygons. */
 static rad_status reserve_polys(rad_scene *s, size_t ntri, rad_error *err)
 {
 	if (ntri > MAX_IDS - s->npolys)
@@ -290,11 +391,6 @@ static rad_status reserve_polys(rad_scene *s, size_t ntri, rad_error *err)
 		return rad_fail(err, RAD_ERR_NOMEM, "triangles: out of memory");
 	if (cap == s->cap_polys)
 		return RAD_OK;
-	float *stage = rad_mem_realloc(&s->mem, RAD_MEM_GEOMETRY, s->stage,
-	                               (size_t)cap * 9 * sizeof(float));
-	if (!stage)
-		return rad_fail(err, RAD_ERR_NOMEM, "triangles: out of memory");
-	s->stage = stage;
 	if (s->stage_base) {
 		uint32_t *base = rad_mem_realloc(&s->mem, RAD_MEM_GEOMETRY,
 		                                 s->stage_base,
@@ -345,9 +441,9 @@ rad_status rad_scene_add_surface(rad_scene *s, const rad_surface_desc *d,
 	if (ntri && !xyz)
 		return rad_fail(err, RAD_ERR_INVALID,
 		                "triangles: NULL coordinates for %zu", ntri);
-	/* Polygons without staged vertices were merged by a commit that then
-	 * failed: new triangles could not be merged with them. */
-	if (s->npolys && !s->stage)
+	/* A commit that then failed has merged the polygons: new triangles
+	 * could not be merged with them. */
+	if (s->merged)
 		return rad_fail(err, RAD_ERR_STATE,
 		                "triangles: a failed commit has merged the "
 		                "scene; only commit may be retried");
@@ -363,9 +459,9 @@ rad_status rad_scene_add_surface(rad_scene *s, const rad_surface_desc *d,
 		return st;
 	for (size_t i = 0; i < ntri; i++) {
 		rad_poly *p = &s->polys[s->npolys];
-		float *stage = s->stage + (size_t)9 * s->npolys;
+		float f[9];
 		s->counts.triangles_in++;
-		switch (make_triangle(xyz + 9 * i, p, stage)) {
+		switch (make_triangle(s, xyz + 9 * i, p, f)) {
 		case RAD_POLY_NONFINITE:
 			s->counts.triangles_nonfinite++;
 			continue;
@@ -375,6 +471,11 @@ rad_status rad_scene_add_surface(rad_scene *s, const rad_surface_desc *d,
 		case RAD_POLY_OK:
 			break;
 		}
+		for (int k = 0; k < 3; k++)
+			if ((st = rad_scene_vertex_id(s, f + 3 * k, &p->v[k],
+			                              err)))
+				return st;
+		p->v[3] = p->v[2];
 		p->mat = material;
 		p->node = node;
 		p->side = d->two_sided ? RAD_SIDE_FRONT : RAD_SIDE_ONE;
@@ -548,17 +649,14 @@ rad_status rad_scene_polygon_get(const rad_scene *s, uint32_t i,
 		                s->npolys);
 	const rad_poly *p = &s->polys[i];
 	const rad_material *m = &s->mats[p->mat];
-	out->ncorners = p->quad ? 4 : 3;
+	v3 v[4];
+	out->ncorners = rad_poly_corners(s, p, v);
+	for (int k = 0; k < out->ncorners; k++) {
+		out->corners[k][0] = v[k].x;
+		out->corners[k][1] = v[k].y;
+		out->corners[k][2] = v[k].z;
+	}
 	for (int c = 0; c < 3; c++) {
-		out->corners[0][c] = p->p0[c];
-		out->corners[1][c] = (double)p->p0[c] + p->e1[c];
-		if (p->quad) {
-			out->corners[2][c] =
-			        (double)p->p0[c] + p->e1[c] + p->e2[c];
-			out->corners[3][c] = (double)p->p0[c] + p->e2[c];
-		} else {
-			out->corners[2][c] = (double)p->p0[c] + p->e2[c];
-		}
 		out->normal[c] = p->n[c];
 		out->reflectance[c] = m->rho[c];
 		out->luminance[c] = m->emit[c] / M_PI;

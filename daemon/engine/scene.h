@@ -5,13 +5,16 @@
  * parallelograms), a shared material table, punctual/directional lights
  * and the Embree BVH over the polygons.  Solvers never modify it.
  *
- * A polygon is stored as an origin and two edge vectors:
+ * A polygon is its corners, indices into the scene's one vertex array
+ * (each distinct float point once, shared by every polygon that has it,
+ * and by the BVH).  The engine sees it as an origin and two edges:
  *   triangle:      p0, p0+e1, p0+e2          (points p0 + s e1 + t e2,
  *                                             s,t >= 0, s+t <= 1)
  *   parallelogram: p0, p0+e1, p0+e1+e2, p0+e2 (s,t in [0,1])
  * which is also how quadtree elements describe their sub-region, so the
- * whole hierarchy shares one geometry representation.  The front side is
- * the side of n = normalize(e1 x e2).
+ * whole hierarchy shares one geometry representation.  The edges are
+ * the float differences of the corners (rad_poly_frame).  The front side
+ * is the side of n = normalize(e1 x e2).
  */
 #ifndef LUXRAD_SCENE_H
 #define LUXRAD_SCENE_H
@@ -33,17 +36,24 @@ typedef struct rad_material {
 	float emit[3]; /* exitance per channel, lux (pi x luminance) */
 } rad_material;
 
-/* A hash of six floats by their bits, a[0..2] then b[0..2] (FNV-1a with
- * a final mix): the merger's edges, the builder's materials. */
-static inline uint32_t rad_hash_floats6(const float a[3], const float b[3])
+/* FNV-1a over n 32-bit words by their bits, from h (RAD_HASH_SEED);
+ * rad_hash_end gives the final mix.  Keys: the builder's materials and
+ * vertices, the merger's edges. */
+#define RAD_HASH_SEED 0x811c9dc5u
+static inline uint32_t rad_hash_words(uint32_t h, const void *w, int n)
 {
-	uint32_t h = 0x811c9dc5u;
-	for (int i = 0; i < 6; i++) {
+	const unsigned char *c = w;
+	for (int i = 0; i < n; i++) {
 		uint32_t bits;
-		memcpy(&bits, i < 3 ? a + i : b + i - 3, sizeof(bits));
+		memcpy(&bits, c + 4 * i, sizeof(bits));
 		h = (h ^ bits) * 0x01000193u;
 		h ^= h >> 15;
 	}
+	return h;
+}
+
+static inline uint32_t rad_hash_end(uint32_t h)
+{
 	return h * 0x9e3779b1u;
 }
 
@@ -62,14 +72,18 @@ static inline int rad_material_emits(const rad_material *m)
 }
 
 typedef struct rad_poly {
-	float p0[3], e1[3], e2[3]; /* origin and edges (see above) */
-	float n[3];                /* unit normal, front side */
-	float area;                /* m2 */
-	uint32_t mat;              /* index into the material table */
-	uint32_t node;             /* index into the node name table */
-	uint8_t quad;              /* 1 = parallelogram, 0 = triangle */
-	uint8_t side;              /* rad_side */
+	uint32_t v[4]; /* corners in s->verts: p0, p0+e1, then p0+e1+e2 and
+	                  p0+e2 (a parallelogram; its third corner is the
+	                  input's own vertex), or p0+e2 twice (a triangle):
+	                  Embree's quad layout, so the BVH reads this array */
+	float n[3];    /* unit normal, front side */
+	float area;    /* m2 */
+	uint32_t mat;  /* index into the material table */
+	uint32_t node; /* index into the node name table */
+	uint8_t quad;  /* 1 = parallelogram, 0 = triangle */
+	uint8_t side;  /* rad_side */
 } rad_poly;
+_Static_assert(sizeof(rad_poly) == 44, "rad_poly layout");
 
 /* Which faces of its sheet a polygon is. */
 enum rad_side {
@@ -141,9 +155,20 @@ struct rad_scene {
 
 	rad_poly *polys; /* GEOMETRY */
 	uint32_t npolys, cap_polys;
-	float *stage; /* GEOMETRY, until commit: the float-rounded
-	                 input vertices, 9 per polygon, so that quad
-	                 merging finds shared edges by exact match */
+	uint32_t nfront; /* after commit: polys[0 .. nfront-1] are in the
+	                    BVH, the back faces after them are not */
+	float *verts;    /* GEOMETRY: the distinct corners, 3 floats each,
+	                    relative to origin, then RAD_VERT_PAD zeros */
+	uint32_t nverts, cap_verts;
+	uint32_t *vert_slots; /* GEOMETRY, until commit: open addressing,
+	                         vertex id + 1 (0 = free), vert_mask + 1
+	                         slots, so that shared corners are stored
+	                         once and match by id */
+	uint32_t vert_mask;
+	double origin[3]; /* of the vertices: the first triangle's first
+	                     corner, so that a scene far from 0 keeps its
+	                     float edges exact to float precision */
+	int merged;       /* quad merging done: no more triangles */
 
 	uint32_t *twin;       /* GEOMETRY, after commit; NULL when no polygon is
 	                         two-sided: per polygon, its back face's index
@@ -197,25 +222,80 @@ rad_status rad_scene_material_id(rad_scene *s, const rad_material *m,
 /* Release the material hash (commit: no more materials come). */
 void rad_scene_material_index_free(rad_scene *s);
 
-/* What became of a polygon's stored shape (rad_poly_check_stored). */
+/* What became of a polygon's stored shape (rad_poly_check_edges). */
 enum rad_poly_verdict { RAD_POLY_OK, RAD_POLY_NONFINITE, RAD_POLY_DEGENERATE };
 
 /*
- * Check the float edges stored in p against the exact area and unit
- * normal n they were made from: finite, not rounded to zero area, and
+ * Check the float edges e1, e2 of a polygon against the exact area and
+ * unit normal n it was made from: finite, not rounded to zero area, and
  * still giving n (FLOAT_NORMAL_COS).  Input triangles and the pieces of
  * cut polygons are both held to it.
  */
-static inline enum rad_poly_verdict rad_poly_check_stored(const rad_poly *p,
-                                                          double area, v3 n)
+static inline enum rad_poly_verdict
+rad_poly_check_edges(const float e1[3], const float e2[3], double area, v3 n)
 {
-	v3 cf = v3_cross(v3_f(p->e1), v3_f(p->e2));
+	v3 cf = v3_cross(v3_f(e1), v3_f(e2));
 	double lf = v3_len(cf);
 	if (!isfinite((float)area) || !isfinite(lf))
 		return RAD_POLY_NONFINITE;
 	if ((float)area == 0.0f || !(v3_dot(cf, n) > FLOAT_NORMAL_COS * lf))
 		return RAD_POLY_DEGENERATE;
 	return RAD_POLY_OK;
+}
+
+/* Embree reads a vertex with a 16-byte load: the array ends with this
+ * many zero floats. */
+#define RAD_VERT_PAD 4
+
+/* The id of the vertex at float point x (relative to s->origin), added
+ * if no vertex has its bits (scene.c); RAD_ERR_NOMEM or RAD_ERR_LIMIT. */
+rad_status rad_scene_vertex_id(rad_scene *s, const float x[3], uint32_t *id,
+                               rad_error *err);
+/* The vertex hash goes at commit, once every vertex is in (scene.c). */
+void rad_scene_vertex_index_free(rad_scene *s);
+
+static inline const float *rad_scene_vert(const rad_scene *s, uint32_t i)
+{
+	return s->verts + 3 * (size_t)i;
+}
+
+/* Vertex i in world coordinates. */
+static inline v3 rad_scene_vertex(const rad_scene *s, uint32_t i)
+{
+	return v3_add(v3_d(s->origin), v3_f(rad_scene_vert(s, i)));
+}
+
+/* Edge a -> b of the vertex array, as the float difference. */
+static inline void rad_scene_edge(const rad_scene *s, uint32_t a, uint32_t b,
+                                  float e[3])
+{
+	const float *pa = rad_scene_vert(s, a), *pb = rad_scene_vert(s, b);
+	for (int c = 0; c < 3; c++)
+		e[c] = pb[c] - pa[c];
+}
+
+/* p's origin (world, rounded to float) and edges, the way quadtree
+ * regions hold them (hier.h). */
+static inline void rad_poly_frame(const rad_scene *s, const rad_poly *p,
+                                  float p0[3], float e1[3], float e2[3])
+{
+	v3_store_f(p0, rad_scene_vertex(s, p->v[0]));
+	rad_scene_edge(s, p->v[0], p->v[1], e1);
+	rad_scene_edge(s, p->v[0], p->v[3], e2);
+}
+
+static inline v3 rad_poly_e1(const rad_scene *s, const rad_poly *p)
+{
+	float e[3];
+	rad_scene_edge(s, p->v[0], p->v[1], e);
+	return v3_f(e);
+}
+
+static inline v3 rad_poly_e2(const rad_scene *s, const rad_poly *p)
+{
+	float e[3];
+	rad_scene_edge(s, p->v[0], p->v[3], e);
+	return v3_f(e);
 }
 
 /* Shrink the polygon array to its count (the memory merging or cutting
@@ -240,25 +320,24 @@ rad_status rad_scene_check_open(const rad_scene *s, const char *what,
  * across them (conform.c); at commit, after quad merging and bounds. */
 rad_status rad_scene_conform(rad_scene *s, rad_error *err);
 
-/* Position of parametric point (s,t) on a polygon. */
-static inline v3 rad_poly_point(const rad_poly *p, double s, double t)
+/* Position of parametric point (u, t) on polygon p (world). */
+static inline v3 rad_poly_point(const rad_scene *s, const rad_poly *p, double u,
+                                double t)
 {
-	return v3_madd(v3_madd(v3_f(p->p0), v3_f(p->e1), s), v3_f(p->e2), t);
+	return v3_madd(
+	        v3_madd(rad_scene_vertex(s, p->v[0]), rad_poly_e1(s, p), u),
+	        rad_poly_e2(s, p), t);
 }
 
-/* A polygon's corners, counter-clockwise seen from its front; returns
- * their count (3 or 4). */
-static inline int rad_poly_corners(const rad_poly *p, v3 v[4])
+/* A polygon's corners (world), counter-clockwise seen from its front;
+ * returns their count (3 or 4). */
+static inline int rad_poly_corners(const rad_scene *s, const rad_poly *p,
+                                   v3 v[4])
 {
-	v[0] = rad_poly_point(p, 0, 0);
-	v[1] = rad_poly_point(p, 1, 0);
-	if (!p->quad) {
-		v[2] = rad_poly_point(p, 0, 1);
-		return 3;
-	}
-	v[2] = rad_poly_point(p, 1, 1);
-	v[3] = rad_poly_point(p, 0, 1);
-	return 4;
+	int n = p->quad ? 4 : 3;
+	for (int k = 0; k < n; k++)
+		v[k] = rad_scene_vertex(s, p->v[k]);
+	return n;
 }
 
 #endif

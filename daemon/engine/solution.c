@@ -61,9 +61,9 @@ static uint64_t scene_digest(const rad_scene *s)
 		unsigned char
 		        buf[13 * sizeof(float) + 2 * sizeof(uint32_t) + 1];
 		size_t o = 0;
-		memcpy(buf + o, p->p0, sizeof p->p0), o += sizeof p->p0;
-		memcpy(buf + o, p->e1, sizeof p->e1), o += sizeof p->e1;
-		memcpy(buf + o, p->e2, sizeof p->e2), o += sizeof p->e2;
+		float f[9]; /* the polygon as the solvers see it */
+		rad_poly_frame(s, p, f, f + 3, f + 6);
+		memcpy(buf + o, f, sizeof f), o += sizeof f;
 		memcpy(buf + o, p->n, sizeof p->n), o += sizeof p->n;
 		memcpy(buf + o, &p->area, sizeof p->area), o += sizeof p->area;
 		memcpy(buf + o, &p->mat, sizeof p->mat), o += sizeof p->mat;

@@ -80,10 +80,11 @@ static void face_frame(v3 n, v3 *u, v3 *v)
 
 /* The box [a0, a1] x [b0, b1] of a polygon's corners in the frame (o, u,
  * v): box = {a0, a1, b0, b1}, grown (the caller starts it empty). */
-static void grow_box(const rad_poly *p, v3 o, v3 u, v3 v, double box[4])
+static void grow_box(const rad_scene *s, const rad_poly *p, v3 o, v3 u, v3 v,
+                     double box[4])
 {
 	v3 c[4];
-	int nc = rad_poly_corners(p, c);
+	int nc = rad_poly_corners(s, p, c);
 	for (int k = 0; k < nc; k++) {
 		v3 d = v3_sub(c[k], o);
 		double a = v3_dot(d, u), b = v3_dot(d, v);
@@ -106,10 +107,10 @@ static void face_rect(const rad_scene *s, uint32_t node, rad_face *f)
 		if (!node_poly(s, node, i) || v3_dot(v3_f(p->n), n) < FACE_COS)
 			continue;
 		if (!have_ref) {
-			ref = v3_f(p->p0);
+			ref = rad_scene_vertex(s, p->v[0]);
 			have_ref = 1;
 		}
-		grow_box(p, ref, u, v, box);
+		grow_box(s, p, ref, u, v, box);
 	}
 	v3 o = v3_madd(v3_madd(ref, u, box[0]), v, box[2]);
 	v3 eu = v3_scale(u, box[1] - box[0]), ev = v3_scale(v, box[3] - box[2]);
@@ -184,19 +185,21 @@ static int solve2(const double e1[2], const double e2[2], const double q[2],
 
 /* Mark the cells of the nu x nv grid on face f whose centres fall on
  * polygon p, filling their points. */
-static size_t sample_poly(const rad_poly *p, const rad_face *f, int nu, int nv,
-                          double *pts, unsigned char *on)
+static size_t sample_poly(const rad_scene *sc, const rad_poly *p,
+                          const rad_face *f, int nu, int nv, double *pts,
+                          unsigned char *on)
 {
 	v3 o = v3_d(f->origin), fu = v3_d(f->u), fv = v3_d(f->v);
 	double lu = v3_len(fu), lv = v3_len(fv);
 	v3 u = v3_scale(fu, lu > 0 ? 1 / lu : 0);
 	v3 v = v3_scale(fv, lv > 0 ? 1 / lv : 0);
 	double cu = lu > 0 ? lu / nu : 1, cv = lv > 0 ? lv / nv : 1;
-	v3 p0 = v3_f(p->p0);
+	v3 p0 = rad_scene_vertex(sc, p->v[0]);
+	v3 pe1 = rad_poly_e1(sc, p), pe2 = rad_poly_e2(sc, p);
 	double box[4] = {HUGE_VAL, -HUGE_VAL, HUGE_VAL, -HUGE_VAL};
-	grow_box(p, o, u, v, box);
-	double e1[2] = {v3_dot(v3_f(p->e1), u), v3_dot(v3_f(p->e1), v)};
-	double e2[2] = {v3_dot(v3_f(p->e2), u), v3_dot(v3_f(p->e2), v)};
+	grow_box(sc, p, o, u, v, box);
+	double e1[2] = {v3_dot(pe1, u), v3_dot(pe1, v)};
+	double e2[2] = {v3_dot(pe2, u), v3_dot(pe2, v)};
 	double q0[2] = {v3_dot(v3_sub(p0, o), u), v3_dot(v3_sub(p0, o), v)};
 	int i0 = (int)floor(box[0] / cu - 0.5);
 	int i1 = (int)ceil(box[1] / cu - 0.5);
@@ -219,7 +222,7 @@ static size_t sample_poly(const rad_poly *p, const rad_face *f, int nu, int nv,
 			    (p->quad ? s > 1 + EDGE_TOL || t > 1 + EDGE_TOL
 			             : s + t > 1 + EDGE_TOL))
 				continue;
-			v3 x = rad_poly_point(p, s, t);
+			v3 x = rad_poly_point(sc, p, s, t);
 			double *out = pts + 6 * k;
 			out[0] = x.x;
 			out[1] = x.y;
@@ -252,7 +255,7 @@ rad_status rad_scene_face_sample(const rad_scene *s, uint32_t node,
 		const rad_poly *p = &s->polys[i];
 		if (node_poly(s, node, i) &&
 		    v3_dot(v3_f(p->n), nrm) >= FACE_COS)
-			*non += sample_poly(p, f, nu, nv, pts, on);
+			*non += sample_poly(s, p, f, nu, nv, pts, on);
 	}
 	return RAD_OK;
 }

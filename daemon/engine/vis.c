@@ -100,14 +100,15 @@ static void fill_buffers(rad_vis *v, const rad_scene *s)
 		int corners = p->quad ? 4 : 3;
 		if (p->side == RAD_SIDE_BACK) /* its sheet is there */
 			continue;
-		v3_store_f(v->verts + 3 * (size_t)nv, rad_poly_point(p, 0, 0));
+		v3_store_f(v->verts + 3 * (size_t)nv,
+		           rad_poly_point(s, p, 0, 0));
 		v3_store_f(v->verts + 3 * (size_t)nv + 3,
-		           rad_poly_point(p, 1, 0));
+		           rad_poly_point(s, p, 1, 0));
 		v3_store_f(v->verts + 3 * (size_t)nv + 6,
-		           rad_poly_point(p, 0, 1));
+		           rad_poly_point(s, p, 0, 1));
 		if (p->quad)
 			v3_store_f(v->verts + 3 * (size_t)nv + 9,
-			           rad_poly_point(p, 1, 1));
+			           rad_poly_point(s, p, 1, 1));
 		/* Triangle (0, 1, 2); a parallelogram adds (1, 3, 2). */
 		static const uint32_t corner[2][3] = {{0, 1, 2}, {1, 3, 2}};
 		for (int k = 0; k < (p->quad ? 2 : 1); k++) {

@@ -755,9 +755,11 @@ static void test_limit_shared_between_processes(void **state)
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
-	        /* First: it forks, before any thread (Embree's) exists. */
-	        cmocka_unit_test(test_limit_shared_between_processes),
+	        /* Before any thread (Embree's) exists: the first reads
+	         * glibc's heap figures, which other threads' frees would
+	         * move under it; the second forks. */
 	        cmocka_unit_test(test_counts_match_allocator),
+	        cmocka_unit_test(test_limit_shared_between_processes),
 	        cmocka_unit_test(test_joint_peak_with_base),
 	        cmocka_unit_test(test_pool_records_stay_put),
 	        cmocka_unit_test(test_injected_failure_counts_nothing),
