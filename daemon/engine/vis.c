@@ -8,21 +8,31 @@
  *
  * DESIGN
  * - One device per scene: a device's memory monitor then reports exactly
- *   the bytes of this scene's BVH, counted as RAD_MEM_BVH in s->mem.
- *   The monitor is called from TBB worker threads: rad_mem_count is
- *   atomic.  Our own buffers (vertices, indices, the primitive -> polygon
- *   map and this struct) are counted as BVH too: they exist only for
- *   Embree.  They are shared with Embree (rtcSetSharedGeometryBuffer), so
- *   the monitor does not see them and nothing is counted twice.
+ *   the bytes of this scene's BVH, counted as RAD_MEM_BVH in s->mem
+ *   (with this struct).  The monitor is called from TBB worker threads:
+ *   rad_mem_count is atomic.
+ * - The geometry is held once: Embree reads the scene's own arrays
+ *   (rtcSetSharedGeometryBuffer), the vertices and, as the index buffer
+ *   of geometry 0, the polygons: their first three corners are a
+ *   triangle, or the first half of a parallelogram, so primitive i of
+ *   geometry 0 is polygon i (the back faces, after every polygon the BVH
+ *   holds, are left out).  Geometry 1 holds the parallelograms' second
+ *   halves, with their own index buffer and polygon map (16 bytes a
+ *   parallelogram, counted as BVH).  Shared corners are one vertex, so
+ *   neighbours meet without cracks.  Measured against one quad geometry
+ *   read straight from the polygons (triangles repeating their last
+ *   corner): its BVH was 1.0 MB larger on the grand hall (hr, 4
+ *   iterations, 2 threads) and the run 10 % slower, as Embree tests
+ *   both halves of every quad.
+ * - Vertices are relative to the scene's origin (scene.h), and so are
+ *   the rays: a scene far from 0 is traced at the precision of one near
+ *   it.
  * - The layout (rad_bvh_set_mode): Embree's default, or compact, whose
  *   leaves index our shared vertices instead of holding copies.  Same
  *   hits, so the same results to the bit.  Measured, 2 threads, 4
  *   iterations of hr: the grand hall's BVH 33.9 -> 24.4 MB (-28 %) for
  *   +8-10 % wall time; the hospital room's 5.0 -> 3.7 MB, time within
- *   the noise.  A quad geometry (a primitive per parallelogram) was
- *   tried too: its BVH was larger (35.9 MB), 25.4 MB compact.
- * - One triangle geometry; a parallelogram becomes two triangles, so
- *   prim_poly[] maps Embree's primitive ids back to scene polygons.
+ *   the noise.
  * - Self-intersection (vis.h, docs/PITFALLS.md §1.1): both ends of a segment
  *   are moved off their surfaces along the normal and the ray is shortened
  *   by eps at both ends.  eps scales with the scene (RAD_VIS_EPS_REL x
@@ -37,6 +47,7 @@
  */
 #include <float.h>
 #include <stdatomic.h>
+#include <stddef.h>
 #include <stdio.h>
 #include <string.h>
 
@@ -53,18 +64,16 @@
 struct rad_vis {
 	RTCDevice device;
 	RTCScene scene;
-	rad_mem *mem;         /* the scene's counters */
-	float *verts;         /* shared vertex buffer, padded */
-	uint32_t *tris;       /* shared index buffer, 3 per triangle */
-	uint32_t *prim_poly;  /* Embree primitive -> scene polygon */
-	const uint32_t *twin; /* the scene's back faces (scene.h), or NULL */
-	double eps;           /* trimming distance, metres */
-	char embree_msg[200]; /* last message of the error callback */
+	rad_mem *mem;          /* the scene's counters */
+	const rad_poly *polys; /* the scene's: geometry 0's primitives */
+	uint32_t *second;      /* geometry 1's index buffer, 3 per triangle */
+	uint32_t *second_poly; /* geometry 1's primitive -> polygon */
+	const uint32_t *twin;  /* the scene's back faces (scene.h), or NULL */
+	v3 origin;             /* of the scene's vertices and of the rays */
+	double eps;            /* trimming distance, metres */
+	char embree_msg[200];  /* last message of the error callback */
 	enum RTCError embree_code; /* first code of the error callback */
 };
-
-/* Embree reads the last vertex with a 16-byte load: pad 4 floats. */
-#define VERT_PAD 4
 
 /*
  * Allocations are reported before they happen (post = false), frees after
@@ -91,40 +100,15 @@ static void error_cb(void *ud, enum RTCError code, const char *str)
 	         (int)code, str ? str : "");
 }
 
-/* Fill the shared buffers from the polygons (double sums, float store). */
-static void fill_buffers(rad_vis *v, const rad_scene *s)
-{
-	uint32_t nv = 0, nt = 0;
-	for (uint32_t i = 0; i < s->npolys; i++) {
-		const rad_poly *p = &s->polys[i];
-		int corners = p->quad ? 4 : 3;
-		if (p->side == RAD_SIDE_BACK) /* its sheet is there */
-			continue;
-		v3_store_f(v->verts + 3 * (size_t)nv,
-		           rad_poly_point(s, p, 0, 0));
-		v3_store_f(v->verts + 3 * (size_t)nv + 3,
-		           rad_poly_point(s, p, 1, 0));
-		v3_store_f(v->verts + 3 * (size_t)nv + 6,
-		           rad_poly_point(s, p, 0, 1));
-		if (p->quad)
-			v3_store_f(v->verts + 3 * (size_t)nv + 9,
-			           rad_poly_point(s, p, 1, 1));
-		/* Triangle (0, 1, 2); a parallelogram adds (1, 3, 2). */
-		static const uint32_t corner[2][3] = {{0, 1, 2}, {1, 3, 2}};
-		for (int k = 0; k < (p->quad ? 2 : 1); k++) {
-			for (int j = 0; j < 3; j++)
-				v->tris[3 * (size_t)nt + j] = nv + corner[k][j];
-			v->prim_poly[nt++] = i;
-		}
-		nv += (uint32_t)corners;
-	}
-}
-
 /*
  * eps: scale-relative, floored at a few float ulps of the largest
  * coordinate.  Measured on a rotated 1 m box 5 km from the origin (float
  * spacing 0.5 mm there): without the floor 67 % of the rays between its
  * faces came back blocked, with 1 ulp none; 4 ulps is the margin.
+ * World coordinates, though the BVH is traced relative to the vertices'
+ * origin: the points the solvers trace from are made from float world
+ * origins (hier.h, Regions), and a floor of local ulps let them sink
+ * below their own surface (that box: a third of its rays blocked).
  */
 static double trim_eps(const rad_scene *s)
 {
@@ -141,35 +125,9 @@ static void vis_destroy(rad_vis *v)
 		rtcReleaseScene(v->scene);
 	if (v->device)
 		rtcReleaseDevice(v->device);
-	rad_mem_free(v->mem, RAD_MEM_BVH, v->verts);
-	rad_mem_free(v->mem, RAD_MEM_BVH, v->tris);
-	rad_mem_free(v->mem, RAD_MEM_BVH, v->prim_poly);
+	rad_mem_free(v->mem, RAD_MEM_BVH, v->second);
+	rad_mem_free(v->mem, RAD_MEM_BVH, v->second_poly);
 	rad_mem_free(v->mem, RAD_MEM_BVH, v);
-}
-
-static rad_status alloc_buffers(rad_vis *v, const rad_scene *s,
-                                uint32_t *nverts, uint32_t *ntris,
-                                rad_error *err)
-{
-	size_t nv = 0, nt = 0;
-	for (uint32_t i = 0; i < s->npolys; i++) {
-		if (s->polys[i].side == RAD_SIDE_BACK)
-			continue;
-		nv += s->polys[i].quad ? 4 : 3;
-		nt += s->polys[i].quad ? 2 : 1;
-	}
-	v->verts = rad_mem_alloc(v->mem, RAD_MEM_BVH,
-	                         (3 * nv + VERT_PAD) * sizeof(float));
-	v->tris = rad_mem_alloc(v->mem, RAD_MEM_BVH, 3 * nt * sizeof(uint32_t));
-	v->prim_poly =
-	        rad_mem_alloc(v->mem, RAD_MEM_BVH, nt * sizeof(uint32_t));
-	if (!v->verts || !v->tris || !v->prim_poly)
-		return rad_fail(err, RAD_ERR_NOMEM,
-		                "bvh: out of memory for %zu triangles", nt);
-	memset(v->verts + 3 * nv, 0, VERT_PAD * sizeof(float));
-	*nverts = (uint32_t)nv;
-	*ntris = (uint32_t)nt;
-	return RAD_OK;
 }
 
 /* Out of memory is RAD_ERR_NOMEM, whichever way Embree tells it (the
@@ -198,9 +156,58 @@ rad_bvh_mode rad_bvh_get_mode(void)
 	return (rad_bvh_mode)atomic_load(&bvh_mode);
 }
 
-/* Device, geometry and committed scene over the filled buffers. */
-static rad_status build_embree(rad_vis *v, uint32_t nverts, uint32_t ntris,
-                               rad_error *err)
+/* Geometry 1: the second half (corners 0, 2, 3) of each parallelogram
+ * in the BVH; returns their count, or UINT32_MAX if out of memory. */
+static uint32_t fill_second(rad_vis *v, const rad_scene *s)
+{
+	uint32_t nq = 0;
+	for (uint32_t i = 0; i < s->nfront; i++)
+		nq += s->polys[i].quad;
+	if (nq == 0)
+		return 0;
+	v->second = rad_mem_alloc(v->mem, RAD_MEM_BVH,
+	                          3 * (size_t)nq * sizeof(uint32_t));
+	v->second_poly =
+	        rad_mem_alloc(v->mem, RAD_MEM_BVH, nq * sizeof(uint32_t));
+	if (!v->second || !v->second_poly)
+		return UINT32_MAX;
+	uint32_t k = 0;
+	for (uint32_t i = 0; i < s->nfront; i++) {
+		const rad_poly *p = &s->polys[i];
+		if (!p->quad)
+			continue;
+		v->second[3 * (size_t)k] = p->v[0];
+		v->second[3 * (size_t)k + 1] = p->v[2];
+		v->second[3 * (size_t)k + 2] = p->v[3];
+		v->second_poly[k++] = i;
+	}
+	return nq;
+}
+
+/* A triangle geometry over the scene's vertices and the given index
+ * buffer, attached as the next geometry id; 0 on failure. */
+static int attach_triangles(rad_vis *v, const rad_scene *s, const void *index,
+                            size_t offset, size_t stride, uint32_t count)
+{
+	RTCGeometry g = rtcNewGeometry(v->device, RTC_GEOMETRY_TYPE_TRIANGLE);
+	if (!g)
+		return 0;
+	/* The vertex array ends with RAD_VERT_PAD zeros for Embree's 16-byte
+	 * loads (scene.h). */
+	rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0,
+	                           RTC_FORMAT_FLOAT3, s->verts, 0,
+	                           3 * sizeof(float), s->nverts);
+	rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0,
+	                           RTC_FORMAT_UINT3, index, offset, stride,
+	                           count);
+	rtcCommitGeometry(g);
+	rtcAttachGeometry(v->scene, g);
+	rtcReleaseGeometry(g);
+	return 1;
+}
+
+/* Device, geometries and committed scene over the scene's arrays. */
+static rad_status build_embree(rad_vis *v, const rad_scene *s, rad_error *err)
 {
 	v->device = rtcNewDevice(NULL);
 	if (!v->device) {
@@ -216,35 +223,36 @@ static rad_status build_embree(rad_vis *v, uint32_t nverts, uint32_t ntris,
 	}
 	rtcSetDeviceErrorFunction(v->device, error_cb, v);
 	rtcSetDeviceMemoryMonitorFunction(v->device, monitor_cb, v->mem);
-	RTCGeometry g = rtcNewGeometry(v->device, RTC_GEOMETRY_TYPE_TRIANGLE);
-	if (!g)
-		return embree_fail(v, "rtcNewGeometry", err);
-	rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0,
-	                           RTC_FORMAT_FLOAT3, v->verts, 0,
-	                           3 * sizeof(float), nverts);
-	rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0,
-	                           RTC_FORMAT_UINT3, v->tris, 0,
-	                           3 * sizeof(uint32_t), ntris);
-	rtcCommitGeometry(g);
+	uint32_t nq = fill_second(v, s);
+	if (nq == UINT32_MAX)
+		return rad_fail(err, RAD_ERR_NOMEM,
+		                "bvh: out of memory for %u polygons",
+		                s->nfront);
 	v->scene = rtcNewScene(v->device);
-	if (v->scene) {
-		rtcSetSceneFlags(
-		        v->scene,
-		        RTC_SCENE_FLAG_ROBUST |
-		                RTC_SCENE_FLAG_CONTEXT_FILTER_FUNCTION |
-		                (rad_bvh_get_mode() == RAD_BVH_COMPACT
-		                         ? RTC_SCENE_FLAG_COMPACT
-		                         : RTC_SCENE_FLAG_NONE));
-		rtcSetSceneBuildQuality(v->scene, RTC_BUILD_QUALITY_MEDIUM);
-		rtcAttachGeometry(v->scene, g);
-	}
-	rtcReleaseGeometry(g);
 	if (!v->scene)
 		return embree_fail(v, "rtcNewScene", err);
+	rtcSetSceneFlags(v->scene,
+	                 RTC_SCENE_FLAG_ROBUST |
+	                         RTC_SCENE_FLAG_CONTEXT_FILTER_FUNCTION |
+	                         (rad_bvh_get_mode() == RAD_BVH_COMPACT
+	                                  ? RTC_SCENE_FLAG_COMPACT
+	                                  : RTC_SCENE_FLAG_NONE));
+	rtcSetSceneBuildQuality(v->scene, RTC_BUILD_QUALITY_MEDIUM);
+	if (!attach_triangles(v, s, s->polys, offsetof(rad_poly, v),
+	                      sizeof(rad_poly), s->nfront) ||
+	    (nq &&
+	     !attach_triangles(v, s, v->second, 0, 3 * sizeof(uint32_t), nq)))
+		return embree_fail(v, "rtcNewGeometry", err);
 	rtcCommitScene(v->scene);
 	if (rtcGetDeviceError(v->device) != RTC_ERROR_NONE)
 		return embree_fail(v, "rtcCommitScene", err);
 	return RAD_OK;
+}
+
+/* The polygon of primitive prim of geometry geom. */
+static uint32_t hit_poly(const rad_vis *v, unsigned geom, unsigned prim)
+{
+	return geom == 0 ? prim : v->second_poly[prim];
 }
 
 rad_status rad_vis_build(rad_scene *s, rad_error *err)
@@ -254,12 +262,9 @@ rad_status rad_vis_build(rad_scene *s, rad_error *err)
 	if (!v)
 		return rad_fail(err, RAD_ERR_NOMEM, "bvh: out of memory");
 	v->mem = &s->mem;
-	uint32_t nverts = 0, ntris = 0;
-	rad_status st = alloc_buffers(v, s, &nverts, &ntris, err);
-	if (!st) {
-		fill_buffers(v, s);
-		st = build_embree(v, nverts, ntris, err);
-	}
+	v->polys = s->polys;
+	v->origin = v3_d(s->origin);
+	rad_status st = build_embree(v, s, err);
 	if (st) {
 		vis_destroy(v);
 		return st;
@@ -295,6 +300,7 @@ static int occluded(const rad_vis *v, v3 org, v3 dir, double tnear, double tfar)
 {
 	struct RTCIntersectContext ctx;
 	rtcInitIntersectContext(&ctx);
+	org = v3_sub(org, v->origin);
 	struct RTCRay ray = {
 	        .org_x = (float)org.x,
 	        .org_y = (float)org.y,
@@ -376,6 +382,7 @@ uint32_t rad_vis_first_hit(const rad_vis *v, v3 org, v3 dir, double tfar,
 	if (!(len > 0))
 		return UINT32_MAX;
 	dir = v3_scale(dir, 1.0 / len);
+	org = v3_sub(org, v->origin);
 	struct RTCIntersectContext ctx;
 	rtcInitIntersectContext(&ctx);
 	struct RTCRayHit rh;
@@ -393,7 +400,7 @@ uint32_t rad_vis_first_hit(const rad_vis *v, v3 org, v3 dir, double tfar,
 	if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID)
 		return UINT32_MAX;
 	*t = rh.ray.tfar;
-	return v->prim_poly[rh.hit.primID];
+	return hit_poly(v, rh.hit.geomID, rh.hit.primID);
 }
 
 /*
@@ -405,18 +412,13 @@ typedef struct front_ctx {
 	const rad_vis *v;
 	v3 dir;             /* the ray's direction */
 	float back_t;       /* nearest back-face hit so far, or +inf */
-	unsigned back_prim; /* its primitive */
+	uint32_t back_poly; /* its polygon */
 } front_ctx;
 
-/* 1 if dir meets primitive prim from its front (e1 x e2, as built by
- * fill_buffers; a parallelogram's second triangle has the same sense). */
-static int prim_front(const rad_vis *v, unsigned prim, v3 dir)
+/* 1 if dir meets polygon i from its front. */
+static int poly_front(const rad_vis *v, uint32_t i, v3 dir)
 {
-	const uint32_t *t = v->tris + 3 * (size_t)prim;
-	v3 a = v3_f(v->verts + 3 * (size_t)t[0]);
-	v3 e1 = v3_sub(v3_f(v->verts + 3 * (size_t)t[1]), a);
-	v3 e2 = v3_sub(v3_f(v->verts + 3 * (size_t)t[2]), a);
-	return v3_dot(v3_cross(e1, e2), dir) < 0;
+	return v3_dot(v3_f(v->polys[i].n), dir) < 0;
 }
 
 /*
@@ -424,8 +426,8 @@ static int prim_front(const rad_vis *v, unsigned prim, v3 dir)
  * particular order.  Back faces are noted (the nearest one) and rejected,
  * so the traversal goes on to find the nearest front face.  Offsets of the
  * packet layout of rtcore_ray.h (its accessors are C++ only): tfar is
- * float 8N + i of the ray, primID unsigned 5N + i of the hit; Embree has
- * put the candidate's distance in tfar.
+ * float 8N + i of the ray, primID and geomID unsigned 5N + i and 6N + i
+ * of the hit; Embree has put the candidate's distance in tfar.
  */
 static void front_filter(const struct RTCFilterFunctionNArguments *args)
 {
@@ -434,13 +436,14 @@ static void front_filter(const struct RTCFilterFunctionNArguments *args)
 	for (unsigned i = 0; i < n; i++) {
 		if (args->valid[i] == 0)
 			continue;
-		unsigned prim = ((const unsigned *)args->hit)[5 * n + i];
-		if (prim_front(fc->v, prim, fc->dir))
+		const unsigned *hit = (const unsigned *)args->hit;
+		uint32_t poly = hit_poly(fc->v, hit[6 * n + i], hit[5 * n + i]);
+		if (poly_front(fc->v, poly, fc->dir))
 			continue;
 		float t = ((const float *)args->ray)[8 * n + i];
 		if (t < fc->back_t) {
 			fc->back_t = t;
-			fc->back_prim = prim;
+			fc->back_poly = poly;
 		}
 		args->valid[i] = 0;
 	}
@@ -450,6 +453,7 @@ uint32_t rad_vis_first_hit_front(const rad_vis *v, v3 org, v3 dir, double tnear,
                                  double tfar, double *t, int *front)
 {
 	front_ctx fc = {.v = v, .dir = dir, .back_t = INFINITY};
+	org = v3_sub(org, v->origin);
 	rtcInitIntersectContext(&fc.ctx);
 	fc.ctx.filter = front_filter;
 	struct RTCRayHit rh;
@@ -469,7 +473,7 @@ uint32_t rad_vis_first_hit_front(const rad_vis *v, v3 org, v3 dir, double tnear,
 	/* A back face wins only when it lies clearly before the front. */
 	if (fc.back_t < INFINITY &&
 	    (!hit || (double)fc.back_t < (double)rh.ray.tfar - v->eps)) {
-		uint32_t poly = v->prim_poly[fc.back_prim];
+		uint32_t poly = fc.back_poly;
 		*t = fc.back_t;
 		/* The back of a two-sided sheet is a face of its own. */
 		if (v->twin && v->twin[poly] != RAD_NONE) {
@@ -481,5 +485,5 @@ uint32_t rad_vis_first_hit_front(const rad_vis *v, v3 org, v3 dir, double tnear,
 	}
 	*front = hit;
 	*t = hit ? rh.ray.tfar : tfar;
-	return hit ? v->prim_poly[rh.hit.primID] : UINT32_MAX;
+	return hit ? hit_poly(v, rh.hit.geomID, rh.hit.primID) : UINT32_MAX;
 }
