@@ -79,7 +79,7 @@ static void print_stats(const json_t *st)
 {
 	const json_t *links = json_object_get(st, "links");
 	const json_t *mem = json_object_get(st, "memory");
-	char a[32], b[32], c[32], d[32];
+	char a[32], b[32], c[32], d[32], e[32];
 
 	if (!json_is_object(st)) {
 		printf("no iteration yet\n");
@@ -94,11 +94,13 @@ static void print_stats(const json_t *st)
 	       lx_jnum(st, "residual", "%.3g", a, sizeof a),
 	       lx_jnum(st, "error_estimate", "%.3g", b, sizeof b),
 	       json_is_true(json_object_get(st, "converged")) ? "yes" : "no");
-	printf("time %s s (last iteration %s s), memory %s (peak %s)\n",
+	printf("time %s s (last iteration %s s), memory %s (peak %s, the "
+	       "solver's own %s)\n",
 	       lx_jnum(st, "seconds_total", "%.3f", a, sizeof a),
 	       lx_jnum(st, "seconds", "%.3f", b, sizeof b),
 	       lx_jbytes(mem, "total_bytes", c, sizeof c),
-	       lx_jbytes(mem, "peak_bytes", d, sizeof d));
+	       lx_jbytes(mem, "peak_bytes", d, sizeof d),
+	       lx_jbytes(mem, "peak_own_bytes", e, sizeof e));
 }
 
 int lx_cmd_info(lx_ctx *cx)

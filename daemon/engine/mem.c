@@ -69,6 +69,7 @@ void rad_mem_report_add(const rad_mem *m, rad_mem_report *r)
 	r->total += total;
 	r->peak_total += atomic_load(&m->peak);
 	r->peak_work += atomic_load(&m->peak_work);
+	r->peak_own += atomic_load(&m->peak_work);
 }
 
 void rad_mem_report_joint(const rad_mem *m, rad_mem_report *r)
@@ -78,6 +79,7 @@ void rad_mem_report_joint(const rad_mem *m, rad_mem_report *r)
 	if (!m->base)
 		return;
 	rad_mem_report_add(m->base, r);
+	r->peak_own = atomic_load(&m->peak_work);
 	int64_t p = atomic_load(&m->peak_joint);
 	int64_t w = atomic_load(&m->peak_work_joint);
 	int64_t bp = atomic_load(&m->base->peak);

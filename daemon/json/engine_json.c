@@ -28,6 +28,7 @@ json_t *ej_memory(const rad_mem_report *m)
 	json_object_set_new(o, "total_bytes", json_integer(m->total));
 	json_object_set_new(o, "peak_bytes", json_integer(m->peak_total));
 	json_object_set_new(o, "peak_work_bytes", json_integer(m->peak_work));
+	json_object_set_new(o, "peak_own_bytes", json_integer(m->peak_own));
 	json_object_set_new(o, "by_kind", kinds);
 	return o;
 }

@@ -23,7 +23,7 @@ json_t *ej_real(double v);
  * <stats>: the RAD_STATS fields under their keys, those with a group
  * inside that object ("links": {"stored", "ss", ...}), energy_hist as an
  * array and memory as {"total_bytes", "peak_bytes", "peak_work_bytes",
- * "by_kind": {kind: bytes}}.
+ * "peak_own_bytes", "by_kind": {kind: bytes}}.
  */
 json_t *ej_stats(const rad_stats *st);
 json_t *ej_memory(const rad_mem_report *m);

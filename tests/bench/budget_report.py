@@ -18,18 +18,14 @@ import sys
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import validate_report as vr  # noqa: E402
 
-SCENE_KINDS = ("geometry", "materials", "lights", "names", "bvh")
-
 
 def solver_peak_mib(path):
-    """The solver's own peak in a luxrad-solve --json: the joint peak less
-    the scene's bytes (MiB)."""
+    """The solver's own peak in a luxrad-solve --json (MiB): what
+    memory_budget bounds."""
     o = vr.load_json(path)
     if o is None or "stats" not in o:
         return float("nan")
-    m = o["stats"]["memory"]
-    scene = sum(m["by_kind"][k] for k in SCENE_KINDS)
-    return (m["peak_work_bytes"] - scene) / 1048576.0
+    return o["stats"]["memory"]["peak_own_bytes"] / 1048576.0
 
 
 def main():

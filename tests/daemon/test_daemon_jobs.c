@@ -84,14 +84,18 @@ static void check_stats(const json_t *s)
 	if (!json_is_boolean(dm_get(s, "converged")))
 		fail_msg("stats.converged is not a boolean");
 	json_t *m = dm_get(s, "memory");
-	static const char *const mem[] = {"total_bytes", "peak_bytes",
-	                                  "peak_work_bytes", "by_kind", NULL};
+	static const char *const mem[] = {"total_bytes",     "peak_bytes",
+	                                  "peak_work_bytes", "peak_own_bytes",
+	                                  "by_kind",         NULL};
 	dm_require_keys(m, "stats.memory", mem);
 	dm_require_keys(dm_get(m, "by_kind"), "stats.memory.by_kind",
 	                dm_mem_kinds);
 	assert_true(dm_num(s, "seconds") >= 0);
 	assert_true(dm_num(s, "seconds_total") >= dm_num(s, "seconds"));
 	assert_true(dm_num(m, "peak_bytes") >= dm_num(m, "total_bytes"));
+	assert_true(dm_num(m, "peak_work_bytes") >=
+	            dm_num(m, "peak_own_bytes"));
+	assert_true(dm_num(m, "peak_own_bytes") > 0);
 	assert_true(dm_int(s, "leaves") > 0);
 }
 

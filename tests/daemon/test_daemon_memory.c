@@ -198,12 +198,7 @@ static void test_a_job_budget_holds(void **state)
 	json_t *r = dm_ok(c, "{s:s, s:O}", "cmd", "job.info", "job", job);
 	json_t *info = dm_get(r, "job");
 	json_t *st = dm_get(info, "stats");
-	json_t *m = dm_get(st, "memory");
-	json_t *k = dm_get(m, "by_kind");
-	long long scene = dm_int(k, "geometry") + dm_int(k, "materials") +
-	                  dm_int(k, "lights") + dm_int(k, "names") +
-	                  dm_int(k, "bvh");
-	long long solver = dm_int(m, "peak_work_bytes") - scene;
+	long long solver = dm_int(dm_get(st, "memory"), "peak_own_bytes");
 	double budget = json_number_value(
 	        json_object_get(dm_get(info, "options"), "memory_budget"));
 	print_message("budget %.0f MiB: solver peak %.2f MiB, budget reached "

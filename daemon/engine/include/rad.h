@@ -106,6 +106,9 @@ typedef struct rad_mem_report {
 	                       of the solver and its scene together) */
 	int64_t peak_work;  /* high-water mark of total minus study: what a
 	                       solve without study statistics needs */
+	int64_t peak_own;   /* a solver's stats: the high-water mark of its
+	                       own work, the scene left out (what
+	                       memory_budget bounds); else peak_work */
 } rad_mem_report;
 
 /* JSON-friendly name of a kind ("geometry", "links"...). */
