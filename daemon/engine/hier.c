@@ -44,26 +44,20 @@ static void poly_bounds(const rad_scene *s, const rad_poly *p, float lo[3],
 	}
 }
 
-static double axis_of(v3 v, int axis)
-{
-	return axis == 0 ? v.x : axis == 1 ? v.y : v.z;
-}
-
 /* Quickselect: order[lo..hi) partially sorted so that the element at k
  * has the k-th smallest key (ties broken by polygon id: deterministic). */
-static void select_kth(const rad_scene *s, uint32_t *order, uint32_t lo,
+static void select_kth(const double *ctr, uint32_t *order, uint32_t lo,
                        uint32_t hi, uint32_t k, int axis)
 {
 	while (hi - lo > 1) {
 		uint32_t mid = lo + (hi - lo) / 2;
 		uint32_t pivot = order[mid];
-		double pk = axis_of(poly_centroid(s, &s->polys[pivot]), axis);
+		double pk = ctr[3 * (size_t)pivot + (size_t)axis];
 		/* Three-way partition around (pk, pivot id). */
 		uint32_t lt = lo, i = lo, gt = hi;
 		while (i < gt) {
 			uint32_t id = order[i];
-			double key =
-			        axis_of(poly_centroid(s, &s->polys[id]), axis);
+			double key = ctr[3 * (size_t)id + (size_t)axis];
 			int cmp = key < pk   ? -1
 			          : key > pk ? 1
 			                     : (id < pivot ? -1 : id > pivot);
@@ -172,8 +166,10 @@ static double sphere_mean_sqrt(const double m[6])
 	return sum; /* the octant's area-mean: (1/(pi/2)) int dz dphi */
 }
 
-/* Fill cluster c (range already set): bounds, area; split if large. */
-static rad_status build_cluster(rad_hier *h, uint32_t c, rad_error *err)
+/* Fill cluster c (range already set): bounds, area; split if large.
+ * ctr: the polygons' centroids, 3 per polygon. */
+static rad_status build_cluster(rad_hier *h, uint32_t c, const double *ctr,
+                                rad_error *err)
 {
 	const rad_scene *s = h->scene;
 	rad_cluster *cl = rad_cluster_at(h, c);
@@ -191,8 +187,7 @@ static rad_status build_cluster(rad_hier *h, uint32_t c, rad_error *err)
 		for (int k = 0; k < 3; k++)
 			n[k] += (double)p->area * p->n[k];
 		moments_add(m, p->area, p->n);
-		v3 ctr = poly_centroid(s, p);
-		double q[3] = {ctr.x, ctr.y, ctr.z};
+		const double *q = ctr + 3 * (size_t)h->order[i];
 		for (int k = 0; k < 3; k++) {
 			clo[k] = q[k] < clo[k] ? q[k] : clo[k];
 			chi[k] = q[k] > chi[k] ? q[k] : chi[k];
@@ -216,7 +211,7 @@ static rad_status build_cluster(rad_hier *h, uint32_t c, rad_error *err)
 			axis = k;
 	uint32_t first = cl->first, count = cl->count;
 	uint32_t half = count / 2;
-	select_kth(s, h->order, first, first + count, first + half, axis);
+	select_kth(ctr, h->order, first, first + count, first + half, axis);
 	uint32_t kids = rad_pool_add(&h->clusters, 2);
 	if (kids == RAD_NONE)
 		return rad_fail(err, RAD_ERR_NOMEM,
@@ -229,8 +224,29 @@ static rad_status build_cluster(rad_hier *h, uint32_t c, rad_error *err)
 	a->count = half;
 	b->first = first + half;
 	b->count = count - half;
-	rad_status st = build_cluster(h, kids, err);
-	return st ? st : build_cluster(h, kids + 1, err);
+	rad_status st = build_cluster(h, kids, ctr, err);
+	return st ? st : build_cluster(h, kids + 1, ctr, err);
+}
+
+/* The cluster tree over every polygon, from root cluster 0 (range set).
+ * The centroids every level sorts by are computed once (SCRATCH). */
+static rad_status build_clusters(rad_hier *h, rad_error *err)
+{
+	const rad_scene *s = h->scene;
+	double *ctr = rad_mem_alloc(h->mem, RAD_MEM_SCRATCH,
+	                            3 * (size_t)s->npolys * sizeof(double));
+	if (!ctr)
+		return rad_fail(err, RAD_ERR_NOMEM,
+		                "cluster tree: out of memory");
+	for (uint32_t i = 0; i < s->npolys; i++) {
+		v3 c = poly_centroid(s, &s->polys[i]);
+		ctr[3 * (size_t)i] = c.x;
+		ctr[3 * (size_t)i + 1] = c.y;
+		ctr[3 * (size_t)i + 2] = c.z;
+	}
+	rad_status st = build_cluster(h, 0, ctr, err);
+	rad_mem_free(h->mem, RAD_MEM_SCRATCH, ctr);
+	return st;
 }
 
 /* ------------------------------------------------------- covered parts */
@@ -315,7 +331,7 @@ rad_status rad_hier_init(rad_hier *h, const rad_scene *s, rad_mem *mem,
 	rad_cluster *root = rad_cluster_at(h, 0);
 	root->first = 0;
 	root->count = n;
-	rad_status st = build_cluster(h, 0, err);
+	rad_status st = build_clusters(h, err);
 	if (st) {
 		rad_hier_destroy(h);
 		return st;
