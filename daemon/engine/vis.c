@@ -30,9 +30,8 @@
  * - The layout (rad_bvh_set_mode): Embree's default, or compact, whose
  *   leaves index our shared vertices instead of holding copies.  Same
  *   hits, so the same results to the bit.  Measured, 2 threads, 4
- *   iterations of hr: the grand hall's BVH 33.9 -> 24.4 MB (-28 %) for
- *   +8-10 % wall time; the hospital room's 5.0 -> 3.7 MB, time within
- *   the noise.
+ *   iterations of hr: the grand hall's BVH 20.0 -> 10.5 MB, solve 2.71
+ *   -> 2.92 s; the hospital room's 2.8 -> 1.5 MB, 3.17 -> 3.40 s.
  * - Self-intersection (vis.h, docs/PITFALLS.md §1.1): both ends of a segment
  *   are moved off their surfaces along the normal and the ray is shortened
  *   by eps at both ends.  eps scales with the scene (RAD_VIS_EPS_REL x
