@@ -314,11 +314,11 @@ static rad_status merge_quads(rad_scene *s, rad_error *err)
 /* ---------------------------------------------------------- back faces */
 
 /*
- * The back face of each two-sided polygon: the same sheet turned over (e1
- * and e2 swapped, the normal negated, the same vertices), appended after every
- * polygon the BVH holds.  Both faces are polygons to the solvers, each with its
- * own elements and radiosity; the sheet is in the BVH once, and s->twin leads
- * a hit from behind to the back face.
+ * The back face of each two-sided polygon: the same sheet turned over
+ * (the same vertices, e1 and e2 swapped, the normal negated), appended
+ * after every polygon the BVH holds.  Both faces are polygons to the
+ * solvers, each with its own elements and radiosity; the sheet is in the
+ * BVH once, and s->twin leads a hit from behind to the back face.
  */
 static rad_status make_back_faces(rad_scene *s, rad_error *err)
 {

@@ -238,8 +238,6 @@ rad_status rad_scene_add_node(rad_scene *s, const char *name, uint32_t *id,
 	return RAD_OK;
 }
 
-/* ------------------------------------------------------------- triangles */
-
 /* ------------------------------------------------------------- vertices */
 
 static uint32_t vertex_hash(const float x[3])

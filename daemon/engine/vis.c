@@ -22,8 +22,8 @@
  *   neighbours meet without cracks.  Measured against one quad geometry
  *   read straight from the polygons (triangles repeating their last
  *   corner): its BVH was 1.0 MB larger on the grand hall (hr, 4
- *   iterations, 2 threads) and the run 10 % slower, as Embree tests
- *   both halves of every quad.
+ *   iterations, 2 threads) and the whole run about 5 % slower, as
+ *   Embree tests both halves of every quad.
  * - Vertices are relative to the scene's origin (scene.h), and so are
  *   the rays: a scene far from 0 is traced at the precision of one near
  *   it.
