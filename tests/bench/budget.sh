@@ -9,7 +9,9 @@
 # run here for a scene that has none yet.  Writes
 # tests/bench/out/budget/: report.md and runs.csv.
 #
-# Usage: bash tests/bench/budget.sh [--threads N] [--only NAME]
+# Usage: bash tests/bench/budget.sh [--threads N] [--only NAME] [--study]
+#   --study   also count re-created links (luxrad-solve --study: its
+#             bookkeeping is in the times, not in the budget)
 #
 # A benchmark, not a test: nothing asserts; it reports.
 set -euo pipefail
@@ -21,11 +23,13 @@ OUT="$ROOT/tests/bench/out/budget"
 REF="$ROOT/tests/bench/out/validate"
 THREADS=2
 ONLY=
+STUDY=()
 while (($#)); do
 	case $1 in
 	--threads) THREADS=$2; shift 2 ;;
 	--only) ONLY=$2; shift 2 ;;
-	*) echo "usage: $0 [--threads N] [--only NAME]" >&2; exit 2 ;;
+	--study) STUDY=(--study); shift ;;
+	*) echo "usage: $0 [--threads N] [--only NAME] [--study]" >&2; exit 2 ;;
 	esac
 done
 
@@ -61,7 +65,8 @@ for row in "${scenes[@]}"; do
 			/usr/bin/time -f "%e %M" -o "$base.time" \
 				"$BUILD/luxrad-solve" "$scene" --points "$points" \
 				--json --solver "$solver" --threads "$THREADS" \
-				--memory-budget "$2" >"$base.json" 2>"$base.err" || rc=$?
+				--memory-budget "$2" "${STUDY[@]}" >"$base.json" \
+				2>"$base.err" || rc=$?
 			echo "$rc" >"$base.rc"
 			echo "$2" >"$base.budget"
 		}

@@ -56,6 +56,11 @@ def main():
                 st = o.get("stats", {})
                 run["budget_held"] = st.get("links", {}).get("budget_held")
                 run["budget_reached"] = st.get("budget_reached")
+                its = o.get("per_iteration", [])
+                run["study"] = bool(o.get("options", {}).get("study"))
+                for key in ("transient", "recreated", "budget_transient"):
+                    run[key] = sum(it.get("links", {}).get(key, 0)
+                                   for it in its)
                 run["tag"] = tag
                 if tag == "none" and "mean" in run:
                     base_err = run["mean"]
@@ -65,7 +70,8 @@ def main():
                 rows.append(run)
     cols = ["scene", "solver", "tag", "budget_mib", "status",
             "solver_peak_mib", "wall_s", "iterations", "links", "worst",
-            "mean", "mean_ratio", "budget_held", "budget_reached"]
+            "mean", "mean_ratio", "budget_held", "budget_reached",
+            "transient", "recreated", "budget_transient"]
     with open(os.path.join(out, "runs.csv"), "w", newline="") as f:
         w = csv.writer(f)
         w.writerow(cols)
@@ -75,14 +81,19 @@ def main():
           "Budget: a fraction of the solver's own peak with no budget "
           "(scene polygons and BVH left out).  Error against the "
           "validation study's references; mean x is the mean error over "
-          "the unbudgeted run's.", "",
+          "the unbudgeted run's.  Transient: links gathered without being "
+          "stored, over all iterations (rmb), of which made so by the "
+          "budget; re-created: links stored again after an earlier "
+          "iteration deleted their pair (with budget.sh --study).", "",
           "| scene | solver | budget | MiB | status | solver peak MiB | "
-          "wall s | links | worst | mean | mean x | held (last it.) |",
-          "|---|---|---|---:|---|---:|---:|---:|---:|---:|---:|---:|"]
+          "wall s | links | worst | mean | mean x | held (last it.) | "
+          "transient (budget) | re-created |",
+          "|---|---|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|"
+          "---:|"]
     for r in rows:
         ok = r["status"] == "ok"
         md.append("| %s | %s | %s | %.1f | %s | %.1f | %.2f | %s | %s | "
-                  "%s | %s | %s |" % (
+                  "%s | %s | %s | %s | %s |" % (
                       r["scene"], r["solver"],
                       "none" if r["tag"] == "none"
                       else "%d %%" % round(100 * float(r["tag"])),
@@ -92,7 +103,10 @@ def main():
                       vr.pct(r["worst"]) if "worst" in r else "",
                       "%.2f %%" % (100 * r["mean"]) if "mean" in r else "",
                       "%.2f" % r["mean_ratio"] if "mean" in r else "",
-                      r.get("budget_held", "") if ok else ""))
+                      r.get("budget_held", "") if ok else "",
+                      "%d (%d)" % (r["transient"], r["budget_transient"])
+                      if ok else "",
+                      r["recreated"] if ok and r["study"] else ""))
     with open(os.path.join(out, "report.md"), "w") as f:
         f.write("\n".join(md) + "\n")
     print("\n".join(md))
