@@ -1122,6 +1122,118 @@ static void test_scene_commit_survives_allocation_failures(void **state)
 	}
 }
 
+/*
+ * The geometry held once: a 2 x 2 grid of unit squares is 9 vertices and
+ * 4 parallelograms, and the BVH, reading the polygons' own corner ids,
+ * finds each square on both its halves (the second half is geometry 1,
+ * through its polygon map: a triangle first makes its ids differ from the
+ * polygons').  A two-sided square's back face has the same
+ * vertices in the other turn, and a hit from behind finds it.
+ */
+static void test_scene_shares_vertices_with_the_bvh(void **state)
+{
+	(void)state;
+	rad_scene *s = scene_start();
+	const double tri[9] = {5, 0, -1, 6, 0, -1, 5, 1, -1};
+	assert_int_equal(rad_scene_add_triangles(s, 0, 0, tri, 1, NULL),
+	                 RAD_OK);
+	for (int i = 0; i < 2; i++)
+		for (int j = 0; j < 2; j++)
+			add_quad(s, 0, 0, V(i, j, 0), V(1, 0, 0), V(0, 1, 0));
+	/* A two-sided square above them. */
+	v3 a = V(0, 0, 1), b = V(0, 1, 1), c = V(1, 1, 1), d = V(1, 0, 1);
+	const double sheet[18] = {a.x, a.y, a.z, b.x, b.y, b.z, c.x, c.y, c.z,
+	                          a.x, a.y, a.z, c.x, c.y, c.z, d.x, d.y, d.z};
+	rad_surface_desc desc = {0, 0, sheet, NULL, 2, 1};
+	assert_int_equal(rad_scene_add_surface(s, &desc, NULL), RAD_OK);
+	commit_ok(s);
+	/* The triangle, 4 squares, the sheet and its back. */
+	assert_int_equal(s->npolys, 7);
+	assert_int_equal(s->nfront, 6);
+	assert_int_equal(s->nverts, 3 + 9 + 4);
+	assert_null(s->vert_slots); /* the hash goes at commit */
+	rad_vis_thread_init();
+	for (uint32_t i = 1; i <= 4; i++) {
+		const rad_poly *p = &s->polys[i];
+		assert_int_equal(p->quad, 1);
+		/* Both halves: s > t is the first triangle, s < t the second.
+		 */
+		for (int half = 0; half < 2; half++) {
+			v3 x = rad_poly_point(s, p, half ? 0.2 : 0.8,
+			                      half ? 0.8 : 0.2);
+			double t;
+			uint32_t hit = rad_vis_first_hit(
+			        s->vis, v3_add(x, V(0, 0, 0.5)), V(0, 0, -1), 2,
+			        &t);
+			assert_int_equal(hit, i);
+			assert_abs(t, 0.5, 1e-6);
+		}
+	}
+	uint32_t front = 5, back = s->twin[front];
+	assert_int_equal(back, 6);
+	const rad_poly *f = &s->polys[front], *k = &s->polys[back];
+	assert_int_equal(k->side, RAD_SIDE_BACK);
+	assert_int_equal(k->v[0], f->v[0]);
+	assert_int_equal(k->v[1], f->v[3]);
+	assert_int_equal(k->v[2], f->v[2]);
+	assert_int_equal(k->v[3], f->v[1]);
+	assert_rel(v3_dot(rad_poly_e1(s, k), rad_poly_e2(s, f)), 1, 1e-7);
+	assert_rel(k->n[2], -f->n[2], 1e-7);
+	int facing = 0;
+	double t;
+	/* From the floor up to the sheet: the front, not the back. */
+	uint32_t hit = rad_vis_first_hit_front(s->vis, V(0.3, 0.6, 0.5),
+	                                       V(0, 0, 1), 0, 2, &t, &facing);
+	uint32_t down = f->n[2] < 0 ? front : back;
+	assert_int_equal(hit, down);
+	assert_int_equal(facing, 1);
+	/* From above: the other face. */
+	hit = rad_vis_first_hit_front(s->vis, V(0.3, 0.6, 1.5), V(0, 0, -1), 0,
+	                              2, &t, &facing);
+	assert_int_equal(hit, down == front ? back : front);
+	assert_int_equal(facing, 1);
+	rad_scene_free(s);
+}
+
+/*
+ * A scene far from the origin keeps exact edges: its vertices are stored
+ * relative to its first corner, so a 1 cm triangle 5 km out has edges as
+ * exact as one at the origin (world floats are 0.5 mm apart there: 5 %
+ * of its edge).
+ */
+static void test_scene_far_from_origin_keeps_exact_edges(void **state)
+{
+	(void)state;
+	rad_scene *s = scene_start();
+	const double X = 5000, Y = 5000;
+	add_quad(s, 0, 0, V(X, Y, 0), V(10, 0, 0), V(0, 10, 0));
+	const double tri[9] = {X + 3.1, Y + 4.7, 1.3,      X + 3.11, Y + 4.7,
+	                       1.3,     X + 3.1, Y + 4.71, 1.3};
+	assert_int_equal(rad_scene_add_triangles(s, 0, 0, tri, 1, NULL),
+	                 RAD_OK);
+	commit_ok(s);
+	assert_int_equal(s->npolys, 2);
+	const rad_poly *p = &s->polys[1];
+	assert_int_equal(p->quad, 0);
+	v3 e1 = rad_poly_e1(s, p), e2 = rad_poly_e2(s, p);
+	assert_rel(e1.x, 0.01, 1e-4);
+	assert_abs(e1.y, 0, 1e-6);
+	assert_rel(e2.y, 0.01, 1e-4);
+	assert_abs(e2.x, 0, 1e-6);
+	v3 p0 = rad_scene_vertex(s, p->v[0]);
+	assert_abs(p0.x, X + 3.1, 1e-6);
+	assert_abs(p0.y, Y + 4.7, 1e-6);
+	assert_rel(p->area, 0.5e-4, 1e-6);
+	/* The BVH, traced relative to the same origin, finds it. */
+	rad_vis_thread_init();
+	double t;
+	uint32_t hit = rad_vis_first_hit(s->vis, V(X + 3.102, Y + 4.702, 2),
+	                                 V(0, 0, -1), 5, &t);
+	assert_int_equal(hit, 1);
+	assert_abs(t, 0.7, 1e-5);
+	rad_scene_free(s);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -1154,6 +1266,8 @@ int main(void)
 	        cmocka_unit_test(test_scene_keeps_non_parallelogram_pairs),
 	        cmocka_unit_test(test_scene_states_and_light_validation),
 	        cmocka_unit_test(test_scene_memory_is_exact),
+	        cmocka_unit_test(test_scene_shares_vertices_with_the_bvh),
+	        cmocka_unit_test(test_scene_far_from_origin_keeps_exact_edges),
 	        cmocka_unit_test(
 	                test_scene_commit_survives_allocation_failures),
 	};
