@@ -106,8 +106,8 @@ static const cfg_key keys[] = {
          "its last iteration; 0 = never"},
         {"bvh", K_CHOICE, F(bvh), 0, 0, "LAYOUT", "compact",
          "how scenes lay out their BVH: fast = Embree's default; compact "
-         "= less of its memory (9-28 % measured) for a slower solve "
-         "(10-25 %), the same results"},
+         "= less of its memory (14-47 % measured) for a slower solve "
+         "(7-9 %), the same results"},
         {"query_threads", K_INT, F(query_threads), 1, 256, "N", "4",
          "threads answering queries and exports (1..256)"},
         {"accuracy", K_REAL, F(accuracy), RAD_ACCURACY_MIN, RAD_ACCURACY_MAX,
