@@ -467,8 +467,9 @@ static rad_status check_header(const sol_header *hd, const rad_scene *scene,
 	    hd->digest != scene_digest(scene))
 		return rad_fail(
 		        err, RAD_ERR_INVALID,
-		        "solution: made for another scene (%u polygons, "
-		        "this one has %u)",
+		        "solution: made for another scene, or for this one as "
+		        "an earlier engine stored its geometry (%u polygons, "
+		        "this one has %u; their digests differ)",
 		        hd->npolys, scene->npolys);
 	int empty = hd->npolys == 0;
 	if (empty ? (hd->nelems || hd->nclusters)

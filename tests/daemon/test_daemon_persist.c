@@ -11,7 +11,10 @@
  *  - SIGTERM: exit status 0, and a restart shows the same state (states,
  *    iterations, options, names, results); a job running at SIGTERM
  *    finishes after the restart with the uninterrupted result; new ids
- *    do not reuse old ones.
+ *    do not reuse old ones;
+ *  - a finished job whose checkpoint the engine refuses (as after an
+ *    upgrade that changed the solution format or the scene's geometry)
+ *    is replayed at the restart and answers with the same lux as before.
  */
 #include <setjmp.h>
 #include <signal.h>
@@ -415,12 +418,73 @@ static void test_sigterm_exits_zero_and_restart_keeps_state(void **state)
 	dm_pass();
 }
 
+/* The checkpoint file of job `job` in data directory dir. */
+static void checkpoint_path(const char *dir, long long job, char *out,
+                            size_t len)
+{
+	char cmd[512], *found = NULL;
+	snprintf(cmd, sizeof(cmd), "ls %s/results/%lld-*.sol", dir, job);
+	if (dm_run(cmd, &found) != 0 || !found || !found[0])
+		fail_msg("no checkpoint for job %lld in %s/results", job, dir);
+	found[strcspn(found, "\n")] = 0;
+	snprintf(out, len, "%s", found);
+	free(found);
+}
+
+static void test_refused_checkpoint_is_replayed(void **state)
+{
+	(void)state;
+	dm_daemon *d = dm_start(NULL);
+	dm_conn *c = dm_open(d, NULL);
+	json_t *scene = NULL;
+	json_t *job = dm_solve_sample(c, "cornell.gltf", &scene);
+	double lux0[NPROBE], lux1[NPROBE];
+	long long it0 = dm_query_points(c, job, probe, 4, lux0);
+	dm_stop(d);
+	assert_int_equal(dm_wait_closed(c, 1000), 1);
+
+	/* The scene digest in the solution's header (solution.c: ten
+	 * 32-bit words, then the digest) no longer matches. */
+	char path[600];
+	checkpoint_path(d->dir, json_integer_value(job), path, sizeof(path));
+	FILE *f = fopen(path, "r+b");
+	assert_non_null(f);
+	assert_int_equal(fseek(f, 40, SEEK_SET), 0);
+	int b = fgetc(f);
+	assert_true(b != EOF);
+	assert_int_equal(fseek(f, 40, SEEK_SET), 0);
+	assert_int_equal(fputc(b ^ 0xff, f), b ^ 0xff);
+	assert_int_equal(fclose(f), 0);
+
+	dm_restart(d);
+	c = dm_open(d, NULL);
+	json_decref(dm_wait_job(c, job, "done", 150000));
+	long long it1 = dm_query_points(c, job, probe, 4, lux1);
+	assert_int_equal(it1, it0);
+	for (int i = 0; i < 4; i++)
+		if (lux1[i] != lux0[i])
+			fail_msg("point %d: %.9g lux after the replay, %.9g "
+			         "before",
+			         i, lux1[i], lux0[i]);
+	size_t n = 0;
+	char *log = (char *)dm_read_file(d->log_path, &n);
+	assert_non_null(log);
+	assert_non_null(strstr(log, "checkpoint refused"));
+	assert_non_null(strstr(log, "replaying its"));
+	free(log);
+	dm_stop(d);
+	json_decref(job);
+	json_decref(scene);
+	dm_pass();
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
 #define T(f) cmocka_unit_test_setup_teardown(f, dm_setup, dm_teardown)
 	        T(test_kill9_mid_solve_then_restart_resumes),
 	        T(test_sigterm_exits_zero_and_restart_keeps_state),
+	        T(test_refused_checkpoint_is_replayed),
 #undef T
 	};
 	const char *filter = getenv("LUXRAD_TEST_FILTER");

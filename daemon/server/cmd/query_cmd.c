@@ -551,14 +551,24 @@ static query_task *begin(cmd_req *r, query_kind kind)
 		return NULL;
 	pthread_mutex_lock(&j->mu);
 	srv_sol *sol = j->sol;
+	uint32_t iter = j->iteration;
 	if (sol)
 		srv_sol_ref(sol);
 	pthread_mutex_unlock(&j->mu);
 	if (!sol) {
-		cmd_req_fail(r, RP_ERR_STATE,
-		             "job %llu has no solution yet: it has not "
-		             "completed an iteration",
-		             (unsigned long long)j->id);
+		if (iter == 0)
+			cmd_req_fail(r, RP_ERR_STATE,
+			             "job %llu has no solution yet: it has not "
+			             "completed an iteration",
+			             (unsigned long long)j->id);
+		else
+			cmd_req_fail(r, RP_ERR_STATE,
+			             "job %llu has no solution now: its "
+			             "checkpoint of iteration %u was not "
+			             "restored at the daemon's start (see its "
+			             "log); a done, queued or running job "
+			             "replays it, a paused one when resumed",
+			             (unsigned long long)j->id, iter);
 		return NULL;
 	}
 	query_task *q = calloc(1, sizeof(*q));

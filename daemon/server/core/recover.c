@@ -6,7 +6,11 @@
  * client that sees the address file sees every scene and job.  What
  * comes back (service.c, DESIGN, checkpoint rule):
  *   - done / failed / cancelled: state, stats and the checkpointed
- *     solution (rad_solution_load), so queries and export work at once;
+ *     solution (rad_solution_load), so queries and export work at once.
+ *     A done job whose checkpoint this engine refuses (a solution format
+ *     or scene geometry of an earlier version) is re-queued: the worker
+ *     replays it to its iteration, which the results being deterministic
+ *     makes the same solution, and it ends done again, checkpointed;
  *   - queued / running: re-queued; the worker replays the solver to the
  *     checkpointed iteration (queries meanwhile read the checkpoint's
  *     solution) and goes on toward the stored target;
@@ -235,6 +239,12 @@ static void recover_job(srv *s, const srv_job_row *r)
 	if (r->has_result)
 		restore_solution(s, j);
 	j->state = r->state < SRV_JOB_NSTATES ? r->state : SRV_JOB_PAUSED;
+	if (j->state == SRV_JOB_DONE && r->has_result && !j->sol) {
+		srv_warn("job %llu: replaying its %u iterations to make its "
+		         "solution again",
+		         (unsigned long long)j->id, j->iteration);
+		j->state = SRV_JOB_QUEUED;
+	}
 	j->state_seq = 1;
 	sc->njobs++;
 	srv_job_register(s, j);
