@@ -77,6 +77,48 @@ rad_status rad_scene_check_open(const rad_scene *s, const char *what,
 	return RAD_OK;
 }
 
+/* ---------------------------------------------------------- id indexes */
+
+/*
+ * The builder's indexes of distinct records, materials and vertices:
+ * open addressing over their ids (id + 1 per slot, 0 = free), kept at
+ * most half full, until commit.  A lookup probes from the key's hash to
+ * the first free slot.
+ */
+typedef uint32_t (*id_hash_fn)(const rad_scene *s, uint32_t id);
+
+static void index_put(uint32_t *slots, uint32_t mask, uint32_t hash,
+                      uint32_t id)
+{
+	uint32_t i = hash & mask;
+	while (slots[i])
+		i = (i + 1) & mask;
+	slots[i] = id + 1;
+}
+
+/* Room for n ids in the index (*slots, *mask): when it must grow (or is
+ * gone), a new one of at least `least` slots holds ids 0 .. have-1 again.
+ * 0 if out of memory. */
+static int index_fit(rad_scene *s, rad_mem_kind kind, uint32_t **slots,
+                     uint32_t *mask, size_t n, size_t least, uint32_t have,
+                     id_hash_fn hash)
+{
+	if (*slots && 2 * n <= (size_t)*mask + 1)
+		return 1;
+	size_t cap = least;
+	while (cap < 2 * n)
+		cap *= 2;
+	uint32_t *fresh = rad_mem_calloc(&s->mem, kind, cap, sizeof(*fresh));
+	if (!fresh)
+		return 0;
+	rad_mem_free(&s->mem, kind, *slots);
+	*slots = fresh;
+	*mask = (uint32_t)(cap - 1);
+	for (uint32_t id = 0; id < have; id++)
+		index_put(fresh, *mask, hash(s, id), id);
+	return 1;
+}
+
 /* ------------------------------------------------------------ materials */
 
 static rad_status make_material(const double rho[3], const double lum[3],
@@ -123,34 +165,18 @@ static uint32_t material_hash(const rad_material *m)
 	        rad_hash_words(RAD_HASH_SEED, m->rho, 3), m->emit, 3));
 }
 
-static void material_index_put(rad_scene *s, uint32_t id)
+static uint32_t material_hash_id(const rad_scene *s, uint32_t id)
 {
-	uint32_t i = material_hash(&s->mats[id]) & s->mat_mask;
-	while (s->mat_slots[i])
-		i = (i + 1) & s->mat_mask;
-	s->mat_slots[i] = id + 1;
+	return material_hash(&s->mats[id]);
 }
 
-/* Keep the hash at most half full; 0 if out of memory. */
+/* Room for n materials in the hash, once past MAT_LINEAR; 0 if out of
+ * memory. */
 static int material_index_fit(rad_scene *s, uint32_t n)
 {
-	if (n < MAT_LINEAR)
-		return 1;
-	if (s->mat_slots && 2 * (size_t)n <= (size_t)s->mat_mask + 1)
-		return 1;
-	size_t cap = 2 * (size_t)MAT_LINEAR;
-	while (cap < 2 * (size_t)n)
-		cap *= 2;
-	uint32_t *slots =
-	        rad_mem_calloc(&s->mem, RAD_MEM_MATERIALS, cap, sizeof(*slots));
-	if (!slots)
-		return 0;
-	rad_mem_free(&s->mem, RAD_MEM_MATERIALS, s->mat_slots);
-	s->mat_slots = slots;
-	s->mat_mask = (uint32_t)(cap - 1);
-	for (uint32_t id = 0; id < s->nmats; id++)
-		material_index_put(s, id);
-	return 1;
+	return n < MAT_LINEAR ||
+	       index_fit(s, RAD_MEM_MATERIALS, &s->mat_slots, &s->mat_mask, n,
+	                 2 * (size_t)MAT_LINEAR, s->nmats, material_hash_id);
 }
 
 void rad_scene_material_index_free(rad_scene *s)
@@ -193,7 +219,8 @@ rad_status rad_scene_material_id(rad_scene *s, const rad_material *m,
 		return rad_fail(err, RAD_ERR_NOMEM, "material: out of memory");
 	s->mats[s->nmats] = *m;
 	if (s->mat_slots)
-		material_index_put(s, s->nmats);
+		index_put(s->mat_slots, s->mat_mask, material_hash(m),
+		          s->nmats);
 	*id = s->nmats++;
 	s->counts.materials = s->nmats;
 	return RAD_OK;
@@ -245,31 +272,19 @@ static uint32_t vertex_hash(const float x[3])
 	return rad_hash_end(rad_hash_words(RAD_HASH_SEED, x, 3));
 }
 
-/* A hash at most half full with room for one more vertex; 0 if out of
- * memory.  Built again from the vertices when it has gone (a commit
- * retried after the hash was freed). */
+static uint32_t vertex_hash_id(const rad_scene *s, uint32_t id)
+{
+	return vertex_hash(rad_scene_vert(s, id));
+}
+
+/* Room for one more vertex in the hash, which is built again from the
+ * vertices when it has gone (a commit retried after it was freed); 0 if
+ * out of memory. */
 static int vertex_index_fit(rad_scene *s)
 {
-	size_t need = 2 * ((size_t)s->nverts + 1);
-	if (s->vert_slots && need <= (size_t)s->vert_mask + 1)
-		return 1;
-	size_t cap = 1024;
-	while (cap < need)
-		cap *= 2;
-	uint32_t *slots =
-	        rad_mem_calloc(&s->mem, RAD_MEM_GEOMETRY, cap, sizeof(*slots));
-	if (!slots)
-		return 0;
-	rad_mem_free(&s->mem, RAD_MEM_GEOMETRY, s->vert_slots);
-	s->vert_slots = slots;
-	s->vert_mask = (uint32_t)(cap - 1);
-	for (uint32_t id = 0; id < s->nverts; id++) {
-		uint32_t i = vertex_hash(rad_scene_vert(s, id)) & s->vert_mask;
-		while (slots[i])
-			i = (i + 1) & s->vert_mask;
-		slots[i] = id + 1;
-	}
-	return 1;
+	return index_fit(s, RAD_MEM_GEOMETRY, &s->vert_slots, &s->vert_mask,
+	                 (size_t)s->nverts + 1, 1024, s->nverts,
+	                 vertex_hash_id);
 }
 
 rad_status rad_scene_vertex_id(rad_scene *s, const float x[3], uint32_t *id,
