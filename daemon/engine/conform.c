@@ -315,11 +315,8 @@ static int set_corners(rad_scene *s, rad_poly *q, const v3 *c, int quad, v3 n)
 	double lmax2 = fmax(v3_dot(e1, e1), v3_dot(e2, e2));
 	double area = v3_dot(v3_cross(e1, e2), n) * (quad ? 1 : 0.5);
 	float f[4][3], e1f[3], e2f[3];
-	for (int k = 0; k < nc; k++) {
+	for (int k = 0; k < nc; k++)
 		v3_store_f(f[k], v3_sub(c[k], v3_d(s->origin)));
-		for (int i = 0; i < 3; i++)
-			f[k][i] += 0.0f; /* exact vertex keys (scene.c) */
-	}
 	for (int i = 0; i < 3; i++) {
 		e1f[i] = f[1][i] - f[0][i];
 		e2f[i] = f[nc - 1][i] - f[0][i];

@@ -287,9 +287,11 @@ static int vertex_index_fit(rad_scene *s)
 	                 vertex_hash_id);
 }
 
-rad_status rad_scene_vertex_id(rad_scene *s, const float x[3], uint32_t *id,
+rad_status rad_scene_vertex_id(rad_scene *s, const float p[3], uint32_t *id,
                                rad_error *err)
 {
+	/* + 0.0f turns -0 into +0: keys are bits. */
+	const float x[3] = {p[0] + 0.0f, p[1] + 0.0f, p[2] + 0.0f};
 	if (!vertex_index_fit(s))
 		return rad_fail(err, RAD_ERR_NOMEM,
 		                "vertices: out of memory (%u vertices)",
@@ -362,9 +364,7 @@ static enum rad_poly_verdict make_triangle(rad_scene *s, const double *xyz,
 	for (int k = 0; k < 3; k++) {
 		v[k] = v3_d(xyz + 3 * k);
 		for (int c = 0; c < 3; c++) {
-			/* + 0.0f turns -0 into +0 for exact vertex keys. */
-			f[3 * k + c] =
-			        (float)(xyz[3 * k + c] - s->origin[c]) + 0.0f;
+			f[3 * k + c] = (float)(xyz[3 * k + c] - s->origin[c]);
 			if (!isfinite(f[3 * k + c]))
 				return RAD_POLY_NONFINITE;
 		}

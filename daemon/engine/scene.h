@@ -247,9 +247,10 @@ rad_poly_check_edges(const float e1[3], const float e2[3], double area, v3 n)
  * many zero floats. */
 #define RAD_VERT_PAD 4
 
-/* The id of the vertex at float point x (relative to s->origin), added
- * if no vertex has its bits (scene.c); RAD_ERR_NOMEM or RAD_ERR_LIMIT. */
-rad_status rad_scene_vertex_id(rad_scene *s, const float x[3], uint32_t *id,
+/* The id of the vertex at float point p (relative to s->origin), added
+ * if no vertex has its bits (-0 counts as +0; scene.c); RAD_ERR_NOMEM or
+ * RAD_ERR_LIMIT. */
+rad_status rad_scene_vertex_id(rad_scene *s, const float p[3], uint32_t *id,
                                rad_error *err);
 /* The vertex hash goes at commit, once every vertex is in (scene.c). */
 void rad_scene_vertex_index_free(rad_scene *s);
