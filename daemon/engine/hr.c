@@ -47,7 +47,8 @@ typedef struct gather_job {
 	const rad_solver *sv; /* its cancel flag: the gather stops early */
 	rad_hier *h;
 	double k[3];    /* scale of what comes from surfaces (1: none) */
-	double *took;   /* per polygon root: A I from surfaces, 3 channels */
+	double *took;   /* per GATHER_GRAIN polygon roots: A I from surfaces,
+	                   3 channels */
 	float *xe, *xc; /* per element / cluster id: the push's payload */
 } gather_job;
 
@@ -136,14 +137,24 @@ static void gather_tree(gather_job *g, uint32_t id, double took[3])
 			gather_tree(g, e->child + k, took);
 }
 
+/* The roots are gathered in chunks of GATHER_GRAIN, each by one thread
+ * (rad_par_for's chunks start at multiples of the grain), and what a
+ * chunk's trees took is summed into its own slot in root order: the sum
+ * does not depend on the threads, and costs 24 bytes a chunk where one
+ * slot a root took 24 bytes a polygon (6 MB on the report's grand hall,
+ * the largest thing the gather held). */
+#define GATHER_GRAIN 64
+
 static void gather_roots(void *ud, size_t b, size_t e, int thread)
 {
 	gather_job *g = ud;
 	(void)thread;
 	for (size_t i = b; i < e && !rad_solver_cancelled(g->sv); i++) {
-		double *t = g->took + 3 * i;
-		t[0] = t[1] = t[2] = 0;
+		double *slot = g->took + 3 * (i / GATHER_GRAIN);
+		double t[3] = {0, 0, 0};
 		gather_tree(g, (uint32_t)i, t);
+		for (int c = 0; c < 3; c++)
+			slot[c] += t[c];
 	}
 }
 
@@ -166,8 +177,10 @@ static void gather_pass(rad_solver *sv, gather_job *g, double got[3])
 	uint32_t np = sv->scene->npolys;
 	got[0] = got[1] = got[2] = 0;
 	gather_clusters(g, 0, got);
-	rad_par_for(sv->par, np, 64, gather_roots, g);
-	for (uint32_t i = 0; i < np; i++)
+	size_t nslots = ((size_t)np + GATHER_GRAIN - 1) / GATHER_GRAIN;
+	memset(g->took, 0, nslots * 3 * sizeof(double));
+	rad_par_for(sv->par, np, GATHER_GRAIN, gather_roots, g);
+	for (size_t i = 0; i < nslots; i++)
 		for (int c = 0; c < 3; c++)
 			got[c] += g->took[3 * i + c];
 }
@@ -179,8 +192,10 @@ static double gather_bounded(rad_solver *sv, gather_job *g)
 {
 	uint32_t np = sv->scene->npolys;
 	g->k[0] = g->k[1] = g->k[2] = 1;
-	g->took = rad_mem_calloc(&sv->mem, RAD_MEM_SCRATCH, (size_t)np * 3 + 1,
-	                         sizeof(double));
+	g->took = rad_mem_calloc(
+	        &sv->mem, RAD_MEM_SCRATCH,
+	        ((size_t)np + GATHER_GRAIN - 1) / GATHER_GRAIN * 3 + 1,
+	        sizeof(double));
 	if (!g->took)
 		return -1;
 	double got[3];
