@@ -362,7 +362,9 @@ static rad_status gather_cancelled(rad_error *err)
  * keeps free (wave_room; elements made add w->elem_extra each). */
 static size_t gather_reserve(const rad_solver *sv)
 {
-	size_t n = (size_t)sv->scene->npolys * 3 + 1;
+	size_t n = ((size_t)sv->scene->npolys + GATHER_GRAIN - 1) /
+	                   GATHER_GRAIN * 3 +
+	           1;
 	return n * sizeof(double) + 64 +
 	       ((size_t)sv->h.elems.count + sv->h.clusters.count) *
 	               PUSH_EXTRA_BYTES;
@@ -378,23 +380,25 @@ static rad_status hr_step(rad_solver *sv, rad_error *err)
 	if (!st->started) {
 		rs = hr_initial_links(sv, st);
 		/* Clustered, a cancel leaves pairs pending: started. */
-		st->started = rs != RAD_ERR_CANCELLED || st->wave.todo.n > 0;
+		st->started = rs != RAD_ERR_CANCELLED || hr_refine_left(st);
 	} else if (st->pending) {
 		rs = hr_refine_pending(sv, st);
 	} else if (!st->frozen) {
 		rs = hr_retest_links(sv, st);
 	}
 	st->pending =
-	        st->started && rs == RAD_ERR_CANCELLED && st->wave.todo.n > 0;
+	        st->started && rs == RAD_ERR_CANCELLED && hr_refine_left(st);
 	if (st->pending)
 		/* The pairs left wait in the scratch lists; the radiosity
 		 * is the last iteration's (no gather over half-made
 		 * links). */
 		return rad_fail(err, rs,
 		                "hr: cancelled during refinement (%zu pairs "
-		                "left for the next step); the solution is the "
-		                "last iteration's",
-		                st->wave.todo.n);
+		                "to judge and %zu to split left for the next "
+		                "step); the solution is the last iteration's",
+		                st->wave.todo.n,
+		                st->wave.parents.n - st->wave.parents_next +
+		                        st->wave.held.n);
 	release_scratch(sv, st);
 	if (rs == RAD_ERR_CANCELLED)
 		return rad_fail(

@@ -21,7 +21,7 @@ typedef struct hr_state {
 	double mean_B;     /* area-mean photopic radiosity of the last step */
 	double last_r;     /* residual of the last step */
 	int frozen;        /* refinement stopped (hr_step) */
-	int pending;       /* a cancelled re-test left pairs in wave.todo */
+	int pending;       /* a cancelled re-test left pairs (hr_refine_left) */
 	int clip;          /* leaves' gain held below 1 (node_extra) */
 	double chg[3][3];  /* sum A |dB| per channel, last three steps */
 	double q_jump;     /* rate of the last extrapolation (tail) */
@@ -38,10 +38,13 @@ rad_status hr_initial_links(rad_solver *sv, hr_state *st);
  * clustered first step's waves defer the same way).  A
  * cancel stops the re-test where it is and the waves within a few
  * thousand pairs: RAD_ERR_CANCELLED with the pairs not judged yet kept in
- * st->wave.todo, which hr_refine_pending judges at the next step.
+ * st->wave (todo, and the pairs to split: parents, held), which
+ * hr_refine_pending judges at the next step.
  */
 rad_status hr_retest_links(rad_solver *sv, hr_state *st);
 rad_status hr_refine_pending(rad_solver *sv, hr_state *st);
+/* 1 if a cancelled refinement left pairs to judge or split. */
+int hr_refine_left(const hr_state *st);
 
 /* Pre-order walk over the live nodes (see hier.h on liveness): clusters,
  * then every polygon's quadtree; stops at the first failure. */

@@ -124,7 +124,7 @@ static rad_status hold_pair(rad_solver *sv, hr_state *st, uint32_t r,
                             uint32_t s, int rcv_only)
 {
 	if (sv->mem.budget)
-		wave_pend_split(&sv->h, &st->wave, r, s, rcv_only);
+		wave_pend_split(&sv->h, &st->wave, r, s, rcv_only, 1);
 	return push_pair(sv, &st->wave.held, r, s, (uint32_t)rcv_only);
 }
 
@@ -158,38 +158,107 @@ static rad_status apply(rad_solver *sv, const void *item, const wave_verdict *v)
 	return RAD_OK;
 }
 
-/* Turn the pairs to split into the children pairs of the next wave. */
-static rad_status expand_splits(rad_solver *sv, hr_state *st)
+/*
+ * The children of the pairs a round held are the next round's pairs.
+ * They are made a batch at a time, in the held pairs' order, and judged
+ * before the next batch is made: making them all at once held a list of
+ * them as long as the largest round (1.36 M pairs, 25 MB with its
+ * doubling, in the first step of luxrad-scenegen's 1M field, where the
+ * pairs split took 3 MB).  Judging a batch never reads what making the
+ * next one changes (elements split: a judge asks whether an element may
+ * split, never whether it has), and the pools give their ids in the
+ * same order, so the links and elements are the same as with the whole
+ * round listed at once.
+ */
+#define HR_BATCH_PAIRS (1u << 15)
+
+/* Under a budget: what the pairs still to split will take, counted
+ * afresh (a pair counts its element splits until they are made). */
+static void repend(rad_solver *sv, hr_state *st)
 {
-	for (size_t i = 0; i < st->wave.held.n; i++) {
-		const hr_pair *p = (const hr_pair *)st->wave.held.v + i;
+	rad_wave *w = &st->wave;
+	if (!sv->mem.budget)
+		return;
+	w->pending = w->pending_kids = 0;
+	const hr_pair *p = w->parents.v;
+	for (size_t i = w->parents_next; i < w->parents.n; i++)
+		wave_pend_split(&sv->h, w, p[i].rcv, p[i].src,
+		                (int)p[i].rcv_only, 1);
+	p = w->held.v;
+	for (size_t i = 0; i < w->held.n; i++)
+		wave_pend_split(&sv->h, w, p[i].rcv, p[i].src,
+		                (int)p[i].rcv_only, 1);
+}
+
+/* The pairs held become the parents of the next round. */
+static void next_round(rad_solver *sv, hr_state *st)
+{
+	rad_wave *w = &st->wave;
+	wave_list t = w->parents;
+	w->parents = w->held;
+	w->held = t;
+	w->held.n = 0;
+	w->parents_next = 0;
+	repend(sv, st);
+}
+
+/* List the children of the next parents in todo, up to HR_BATCH_PAIRS
+ * (the children of one parent are never parted). */
+static rad_status expand_batch(rad_solver *sv, hr_state *st)
+{
+	rad_wave *w = &st->wave;
+	while (w->parents_next < w->parents.n && w->todo.n < HR_BATCH_PAIRS) {
+		const hr_pair *p =
+		        (const hr_pair *)w->parents.v + w->parents_next;
 		uint32_t kr[WAVE_KIDS], ks[WAVE_KIDS];
+		if (sv->mem.budget)
+			wave_pend_split(&sv->h, w, p->rcv, p->src,
+			                (int)p->rcv_only, -1);
 		int side, n = wave_children(&sv->h, p->rcv, p->src,
 		                            (int)p->rcv_only, kr, ks, &side);
 		if (n < 0)
 			return RAD_ERR_NOMEM;
 		for (int k = 0; k < n; k++) {
 			rad_status rs =
-			        push_pair(sv, &st->wave.todo, kr[k], ks[k], 0);
+			        push_pair(sv, &w->todo, kr[k], ks[k], 0);
 			if (rs)
 				return rs;
 		}
+		w->parents_next++;
 	}
-	st->wave.held.n = 0;
-	st->wave.pending = st->wave.pending_kids = 0;
 	return RAD_OK;
 }
 
+int hr_refine_left(const hr_state *st)
+{
+	const rad_wave *w = &st->wave;
+	return w->todo.n > 0 || w->parents_next < w->parents.n || w->held.n > 0;
+}
+
 /*
- * Run waves until nothing is left to split.  A deferrable wave
- * (st->wave.defer) cancelled part way keeps the pairs it did not judge
- * at the front of todo, the children of those it split after them, and
- * returns RAD_ERR_CANCELLED: the next step goes on with them.
+ * Run waves until nothing is left to split: the pairs listed in todo,
+ * then the children of the pairs held, round after round.  A deferrable
+ * wave (st->wave.defer) cancelled part way keeps the pairs it did not
+ * judge at the front of todo, and the parents not expanded and the pairs
+ * held where they are, and returns RAD_ERR_CANCELLED: the next step goes
+ * on with them.
  */
 static rad_status refine_waves(rad_solver *sv, hr_state *st)
 {
 	rad_wave *w = &st->wave;
-	while (w->todo.n > 0 || w->held.n > 0) {
+	repend(sv, st);
+	for (;;) {
+		if (w->todo.n == 0) {
+			if (w->parents_next == w->parents.n) {
+				if (w->held.n == 0)
+					return RAD_OK;
+				next_round(sv, st);
+			}
+			rad_status rs = expand_batch(sv, st);
+			if (rs)
+				return rs;
+			continue;
+		}
 		size_t n = w->todo.n;
 		rad_status rs = wave_run(sv, w, w->todo.v, n, judge, apply);
 		size_t left = rs ? 0 : n - w->judged;
@@ -199,14 +268,11 @@ static rad_status refine_waves(rad_solver *sv, hr_state *st)
 			                w->judged * w->item_size,
 			        left * w->item_size);
 		w->todo.n = left;
-		if (!rs)
-			rs = expand_splits(sv, st);
 		if (rs)
 			return rs;
 		if (left)
 			return RAD_ERR_CANCELLED;
 	}
-	return RAD_OK;
 }
 
 /*

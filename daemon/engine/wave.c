@@ -77,6 +77,8 @@ void wave_release(rad_solver *sv, rad_wave *w)
 {
 	list_free(sv, &w->todo);
 	list_free(sv, &w->held);
+	list_free(sv, &w->parents);
+	w->parents_next = 0;
 	rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, w->verdict);
 	w->verdict = NULL;
 	w->verdict_cap = 0;
@@ -364,11 +366,16 @@ static size_t split_cost(const rad_hier *h, const rad_wave *w, uint32_t r,
 }
 
 void wave_pend_split(const rad_hier *h, rad_wave *w, uint32_t r, uint32_t s,
-                     int rcv_only)
+                     int rcv_only, int sign)
 {
-	size_t kids;
-	w->pending += split_cost(h, w, r, s, rcv_only, &kids);
-	w->pending_kids += kids;
+	size_t kids, b = split_cost(h, w, r, s, rcv_only, &kids);
+	if (sign > 0) {
+		w->pending += b;
+		w->pending_kids += kids;
+		return;
+	}
+	w->pending = w->pending > b ? w->pending - b : 0;
+	w->pending_kids = w->pending_kids > kids ? w->pending_kids - kids : 0;
 }
 
 int wave_room_split(const rad_solver *sv, const rad_wave *w, uint32_t r,

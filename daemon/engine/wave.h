@@ -34,6 +34,9 @@ typedef struct rad_wave {
 	wave_list todo;        /* items waiting to be judged */
 	wave_list held;        /* hr: the pairs a wave refused, to split next;
 	                          rmb: the wave taken off the top of todo */
+	wave_list parents;     /* hr: the pairs the last round held, whose
+	                          children are being judged (hr_refine.c) */
+	size_t parents_next;   /* the first of them not expanded yet */
 	wave_verdict *verdict; /* one per item of the wave run, SCRATCH */
 	size_t verdict_cap;
 	uint64_t *rays;      /* per-thread ray counters, SCRATCH */
@@ -148,9 +151,10 @@ int wave_room(const rad_solver *sv, const rad_wave *w, size_t n, size_t rest);
 int wave_room_for(const rad_solver *sv, const rad_wave *w, size_t bytes);
 /* Count in w->pending (and pending_kids) what splitting pair r <- s will
  * take at most once its children are made (as wave_children would:
- * element splits, a link for each child). */
+ * element splits, a link for each child); sign -1 takes it off again,
+ * never below zero, as the pair's children are made. */
 void wave_pend_split(const rad_hier *h, rad_wave *w, uint32_t r, uint32_t s,
-                     int rcv_only);
+                     int rcv_only, int sign);
 /* 1 if that split, with one more pair split at worst, still fits beside
  * what is pending (wave_room). */
 int wave_room_split(const rad_solver *sv, const rad_wave *w, uint32_t r,
