@@ -164,12 +164,13 @@ static void visit(audit_walk *w, uint32_t r, uint32_t s, double ff, uint32_t id)
 static void walk_tree(audit_walk *w, uint32_t id)
 {
 	const rad_link *l = rad_link_at(&w->sv->h, id);
-	if (l->child == RAD_NONE) {
+	uint32_t n, child = rad_link_child(&w->sv->h, l, &n);
+	if (n == 0) {
 		visit(w, l->rcv, l->src, l->ff, id);
 		return;
 	}
-	for (uint32_t k = 0; k < l->nchild; k++)
-		walk_tree(w, l->child + k);
+	for (uint32_t k = 0; k < n; k++)
+		walk_tree(w, child + k);
 }
 
 /* hr: the links node t receives (hr_walk_all visits every node). */

@@ -307,6 +307,8 @@ rad_status rad_hier_init(rad_hier *h, const rad_scene *s, rad_mem *mem,
 	              sizeof(rad_cluster), shift, 0);
 	rad_pool_init(&h->links, mem, RAD_MEM_LINKS, link_size,
 	              shift < 10 ? shift + 2 : 12, 0);
+	rad_pool_init(&h->links_ext, mem, RAD_MEM_LINKS, sizeof(rad_link_ext),
+	              shift < 10 ? shift + 1 : 11, 0);
 	if (n == 0)
 		return rad_fail(err, RAD_ERR_INVALID, "scene has no polygons");
 	h->order =
@@ -345,6 +347,7 @@ void rad_hier_destroy(rad_hier *h)
 	rad_pool_destroy(&h->elems);
 	rad_pool_destroy(&h->clusters);
 	rad_pool_destroy(&h->links);
+	rad_pool_destroy(&h->links_ext);
 	rad_mem_free(h->mem, RAD_MEM_ELEM_CLUSTER, h->order);
 	h->order = NULL;
 }
@@ -750,10 +753,34 @@ uint32_t rad_link_new(rad_hier *h, uint32_t rcv, uint32_t src, float ff,
 	l->rcv = rcv;
 	l->src = src;
 	l->ff = ff;
-	l->spread = spread;
-	l->child = RAD_NONE;
-	l->nchild = l->flags = 0;
+	l->aux = 0;
+	rad_link_set_spread(h, l, spread);
 	return id;
+}
+
+rad_status rad_link_make_passive(rad_hier *h, uint32_t id, uint32_t child,
+                                 uint32_t n, int split_src)
+{
+	uint32_t x = rad_pool_add(&h->links_ext, 1);
+	if (x == RAD_NONE)
+		return RAD_ERR_NOMEM;
+	rad_link *l = rad_link_at(h, id);
+	rad_link_ext *e = rad_pool_at(&h->links_ext, x);
+	e->spread = rad_link_spread(h, l);
+	e->child = child;
+	e->nchild = (uint16_t)n;
+	e->split_src = (uint16_t)(split_src != 0);
+	l->aux = RAD_LINK_EXT | x;
+	return RAD_OK;
+}
+
+void rad_link_make_active(rad_hier *h, rad_link *l)
+{
+	uint32_t x = l->aux & ~RAD_LINK_EXT;
+	float spread = rad_link_ext_of(h, l)->spread;
+	rad_pool_release(&h->links_ext, x);
+	l->aux = 0;
+	rad_link_set_spread(h, l, spread);
 }
 
 /* The moment model of one cluster (hier.h). */

@@ -17,9 +17,14 @@
  *     one of two kinds, the pool's records being the solver's.  Classic
  *     HR (rad_hlink, 16 bytes) chains them on their receiver's list, which
  *     says whose they are, and frees refined links.  The reduced-memory
- *     solver (rad_link, 24 bytes) keeps no lists; a link names both its
+ *     solver (rad_link, 16 bytes) keeps no lists; a link names both its
  *     ends, and a refined (passive) one keeps its children (consecutive
- *     records: `child`, `nchild`) for the link hierarchy.
+ *     records) for the link hierarchy.  Only passive links have
+ *     children, so what says where they are (rad_link_ext, 12 bytes) is a
+ *     record of a pool of its own (links_ext), named by the passive
+ *     link in place of its spread, which moves there with it.  Active
+ *     links -- two thirds of those rmb keeps -- are 16 bytes where one
+ *     record for both kinds made every link 24.
  *
  * Liveness: walk the trees (polygon roots 0 .. npolys-1, root cluster 0),
  * never a pool's id range: pools may hold records skipped so that sibling
@@ -146,6 +151,8 @@
 #ifndef LUXRAD_HIER_H
 #define LUXRAD_HIER_H
 
+#include <string.h>
+
 #include "ff.h"
 #include "mem.h"
 #include "scene.h"
@@ -181,21 +188,26 @@ typedef struct rad_cluster {
 	float nB[3], ndB[3]; /* sum of area x luma(B or dB) x normal (pull) */
 } rad_cluster;
 
-enum {
-	RAD_LINK_PASSIVE = 1u << 0,   /* refined; children kept */
-	RAD_LINK_SPLIT_SRC = 1u << 1, /* passive: the source was split */
-};
-
+/* A link of the reduced-memory solver (rmb), active or passive. */
 typedef struct rad_link {
-	uint32_t rcv;    /* tagged receiver id */
-	uint32_t src;    /* tagged source id */
-	float ff;        /* F(rcv <- src), visibility included; for a light,
-	                    irradiance (lux) per unit of its intensity */
-	float spread;    /* max - min of ff over the receiver's points */
-	uint32_t child;  /* first child link (passive), or RAD_NONE */
-	uint16_t nchild; /* number of consecutive children */
-	uint16_t flags;  /* RAD_LINK_* */
+	uint32_t rcv; /* tagged receiver id */
+	uint32_t src; /* tagged source id */
+	float ff;     /* F(rcv <- src), visibility included; for a light,
+	                 irradiance (lux) per unit of its intensity */
+	uint32_t aux; /* active: the bits of its spread, max - min of ff
+	                 over the receiver's points (>= 0, so the sign bit
+	                 is clear); passive: RAD_LINK_EXT | its ext's id */
 } rad_link;
+
+#define RAD_LINK_EXT 0x80000000u
+
+/* What a passive link has beside its rad_link (links_ext). */
+typedef struct rad_link_ext {
+	float spread;       /* the link's spread */
+	uint32_t child;     /* first of its consecutive children */
+	uint16_t nchild;    /* how many */
+	uint16_t split_src; /* 1: the source was split, 0: the receiver */
+} rad_link_ext;
 
 /* A link of classic HR, on its receiver's list (rad_node_links). */
 typedef struct rad_hlink {
@@ -207,22 +219,24 @@ typedef struct rad_hlink {
 
 /* Sizes the memory study measures by (Regions; links above). */
 _Static_assert(sizeof(rad_elem) == 56, "rad_elem grew");
-_Static_assert(sizeof(rad_link) == 24, "rad_link grew");
+_Static_assert(sizeof(rad_link) == 16, "rad_link grew");
+_Static_assert(sizeof(rad_link_ext) == 12, "rad_link_ext grew");
 _Static_assert(sizeof(rad_hlink) == 16, "rad_hlink grew");
 _Static_assert(sizeof(rad_cluster) == 160, "rad_cluster grew");
 
 typedef struct rad_hier {
 	const rad_scene *scene;
-	rad_mem *mem;      /* the owning solver's counters */
-	rad_pool elems;    /* rad_elem, ELEM_SURFACE */
-	rad_pool clusters; /* rad_cluster, ELEM_CLUSTER */
-	rad_pool links;    /* rad_link, or rad_hlink for hr; LINKS */
-	uint32_t *order;   /* polygon ids in cluster order, ELEM_CLUSTER */
-	uint32_t nleaves;  /* surface leaves */
-	double min_edge;   /* elements with a longer edge may split */
-	uint64_t splits;   /* element splits since last reset */
-	uint64_t gen;      /* unique per rad_hier_init (0: none), the key of
-	                      rad_elem_patch_id's memo */
+	rad_mem *mem;       /* the owning solver's counters */
+	rad_pool elems;     /* rad_elem, ELEM_SURFACE */
+	rad_pool clusters;  /* rad_cluster, ELEM_CLUSTER */
+	rad_pool links;     /* rad_link, or rad_hlink for hr; LINKS */
+	rad_pool links_ext; /* rad_link_ext of passive rad_links; LINKS */
+	uint32_t *order;    /* polygon ids in cluster order, ELEM_CLUSTER */
+	uint32_t nleaves;   /* surface leaves */
+	double min_edge;    /* elements with a longer edge may split */
+	uint64_t splits;    /* element splits since last reset */
+	uint64_t gen;       /* unique per rad_hier_init (0: none), the key of
+	                       rad_elem_patch_id's memo */
 } rad_hier;
 
 static inline rad_elem *rad_elem_at(const rad_hier *h, uint32_t id)
@@ -386,10 +400,56 @@ static inline double rad_luma(const float c[3])
 	return RAD_LUMA_R * c[0] + RAD_LUMA_G * c[1] + RAD_LUMA_B * c[2];
 }
 
-/* Link store (rad_link): allocate one link (child = RAD_NONE, nchild and
- * flags 0), or RAD_NONE. */
+/* Link store (rad_link): allocate one active link, or RAD_NONE. */
 uint32_t rad_link_new(rad_hier *h, uint32_t rcv, uint32_t src, float ff,
                       float spread);
+
+static inline int rad_link_passive(const rad_link *l)
+{
+	return (l->aux & RAD_LINK_EXT) != 0;
+}
+static inline rad_link_ext *rad_link_ext_of(const rad_hier *h,
+                                            const rad_link *l)
+{
+	return (rad_link_ext *)rad_pool_at(&h->links_ext,
+	                                   l->aux & ~RAD_LINK_EXT);
+}
+static inline float rad_link_spread(const rad_hier *h, const rad_link *l)
+{
+	if (rad_link_passive(l))
+		return rad_link_ext_of(h, l)->spread;
+	float f;
+	memcpy(&f, &l->aux, sizeof(f));
+	return f;
+}
+/* Set a link's spread (>= 0; -0 and NaN are stored as 0). */
+static inline void rad_link_set_spread(const rad_hier *h, rad_link *l,
+                                       float spread)
+{
+	spread = spread > 0 ? spread : 0;
+	if (rad_link_passive(l))
+		rad_link_ext_of(h, l)->spread = spread;
+	else
+		memcpy(&l->aux, &spread, sizeof(spread));
+}
+/* First child and number of children of link l (RAD_NONE, 0: active). */
+static inline uint32_t rad_link_child(const rad_hier *h, const rad_link *l,
+                                      uint32_t *n)
+{
+	if (!rad_link_passive(l)) {
+		*n = 0;
+		return RAD_NONE;
+	}
+	const rad_link_ext *x = rad_link_ext_of(h, l);
+	*n = x->nchild;
+	return x->child;
+}
+/* Make active link id passive over the run child .. child+n-1 (its
+ * spread kept); RAD_ERR_NOMEM when the ext pool cannot grow. */
+rad_status rad_link_make_passive(rad_hier *h, uint32_t id, uint32_t child,
+                                 uint32_t n, int split_src);
+/* Make passive link l active again (the run is the caller's to free). */
+void rad_link_make_active(rad_hier *h, rad_link *l);
 /* Projected area of a cluster's polygons in unit direction d (DESIGN):
  * exact over a leaf cluster's polygons, the moment model RAD_PROJ_DEPTH
  * levels below an inner one (the sum of up to 4 models, each exact if it

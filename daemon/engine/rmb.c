@@ -181,22 +181,23 @@ static int tail_jump(rad_solver *sv, rmb_state *st)
 static void count_tree(rad_solver *sv, rmb_state *st, uint32_t id)
 {
 	rad_stats *s = &sv->stats;
-	rad_link *l = rad_link_at(&sv->h, id);
+	const rad_link *l = rad_link_at(&sv->h, id);
 	node_count_link(s, l->rcv, l->src);
-	if (l->flags & L_NEW) {
+	if (rmb_fresh(st, id)) {
 		s->links_created++;
 		if (sv->opt.study &&
 		    rmb_set_has(&st->deleted, rmb_pair_key(l->rcv, l->src)))
 			s->links_recreated++;
-		l->flags &= (uint16_t)~L_NEW;
+		rmb_set_bit(st->fresh, id, 0);
 	}
-	if (l->child == RAD_NONE) {
+	uint32_t n, child = rad_link_child(&sv->h, l, &n);
+	if (n == 0) {
 		s->links_active++;
 		return;
 	}
 	s->links_passive++;
-	for (uint32_t k = 0; k < l->nchild; k++)
-		count_tree(sv, st, l->child + k);
+	for (uint32_t k = 0; k < n; k++)
+		count_tree(sv, st, child + k);
 }
 
 static void count_links(rad_solver *sv)
@@ -306,6 +307,8 @@ static void rmb_destroy(rad_solver *sv)
 	release_scratch(sv, st);
 	wave_destroy(sv, &st->wave);
 	rad_mem_free(&sv->mem, RAD_MEM_LINKS, st->roots);
+	rad_mem_free(&sv->mem, RAD_MEM_LINKS, st->fresh);
+	rad_mem_free(&sv->mem, RAD_MEM_LINKS, st->dead);
 	rad_mem_free(&sv->mem, RAD_MEM_ELEM_CLUSTER, st->black);
 	rad_mem_free(&sv->mem, RAD_MEM_ELEM_CLUSTER, st->arefl);
 	rad_mem_free(&sv->mem, RAD_MEM_ELEM_CLUSTER, st->rhomax);

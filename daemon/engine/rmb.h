@@ -8,13 +8,6 @@
 
 #include "wave.h"
 
-/* rmb's own link flags, beside RAD_LINK_PASSIVE and RAD_LINK_SPLIT_SRC. */
-enum {
-	L_NEW = 1u << 4,   /* made this iteration: no form factor yet */
-	L_DEAD = 1u << 5,  /* carries nothing: remove */
-	L_PRUNE = 1u << 6, /* passive link used at its level: drop subtree */
-};
-
 typedef struct rmb_item {
 	uint32_t rcv, src;
 	uint32_t link; /* its record, or RAD_NONE for a transient pair */
@@ -47,6 +40,11 @@ typedef struct rmb_state {
 	double qmax;       /* ... the largest */
 	int jumped;        /* tail_jump done */
 	rmb_set deleted;   /* study: pairs deleted so far */
+	/* Per link id, one bit each (LINKS): fresh, made this iteration
+	 * (no form factor until gathered; count_links clears it); dead,
+	 * carries nothing (the walk's post-order removes it). */
+	uint64_t *fresh, *dead;
+	size_t cap_bits; /* words of each */
 	/* Receiver accuracy (rcv_too_coarse, rmb_refine.c), by element id:
 	 * cut   links at least this error (a fraction of the limit) go to
 	 *       the receiver's children; 0 = none.  Sticky, ELEM_SURFACE.
@@ -64,7 +62,26 @@ typedef struct rmb_state {
  */
 rad_status rmb_refine_gather(rad_solver *sv, rmb_state *st);
 
+static inline int rmb_bit(const uint64_t *v, uint32_t id)
+{
+	return (int)((v[id >> 6] >> (id & 63)) & 1);
+}
+static inline void rmb_set_bit(uint64_t *v, uint32_t id, int on)
+{
+	uint64_t m = (uint64_t)1 << (id & 63);
+	v[id >> 6] = on ? v[id >> 6] | m : v[id >> 6] & ~m;
+}
+/* Link id is fresh: made this iteration (rmb_state.fresh). */
+static inline int rmb_fresh(const rmb_state *st, uint32_t id)
+{
+	return rmb_bit(st->fresh, id);
+}
+
 /* rmb_nodes.c: */
+/* Grow the link bits to cover every id of the link pool; RAD_ERR_NOMEM. */
+rad_status rmb_cover_links(rad_solver *sv, rmb_state *st);
+/* Links first .. first+n-1 were just made: fresh, not dead. */
+void rmb_made_links(rmb_state *st, uint32_t first, uint32_t n);
 /* 1 if no polygon of the node reflects (a pure source, or black). */
 int rmb_node_black(const rad_solver *sv, uint32_t t);
 /* Area of the node's polygons that reflect (rho > 0). */
@@ -73,9 +90,10 @@ double rmb_node_arefl(const rad_solver *sv, uint32_t t);
 double rmb_node_rho_max(const rad_solver *sv, uint32_t t);
 /* The receiver-accuracy budget of the iteration (lux). */
 double rmb_spread_limit(const rad_solver *sv);
-/* A link the walk deletes: counted unless it was made this iteration, and
- * its pair kept for the study statistics (*rs: out of memory). */
-void rmb_count_deleted(rad_solver *sv, const rad_link *l, rad_status *rs);
+/* Link id, which the walk deletes: counted unless it was made this
+ * iteration, and its pair kept for the study statistics (*rs: out of
+ * memory). */
+void rmb_count_deleted(rad_solver *sv, uint32_t id, rad_status *rs);
 /* Fill black[], arefl[] and rhomax[] for cluster id and below; returns
  * its reflecting area. */
 double rmb_mark_black(rad_solver *sv, uint32_t id);

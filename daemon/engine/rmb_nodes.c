@@ -142,10 +142,42 @@ static rad_status set_add(rad_solver *sv, rmb_set *s, uint64_t k)
 	return RAD_OK;
 }
 
-void rmb_count_deleted(rad_solver *sv, const rad_link *l, rad_status *rs)
+rad_status rmb_cover_links(rad_solver *sv, rmb_state *st)
+{
+	size_t need = ((size_t)sv->h.links.count + 63) / 64;
+	if (need <= st->cap_bits)
+		return RAD_OK;
+	size_t cap = st->cap_bits, old = st->cap_bits;
+	uint64_t *f = rad_mem_grow(&sv->mem, RAD_MEM_LINKS, st->fresh, &cap,
+	                           need, sizeof(uint64_t), 64);
+	if (!f)
+		return RAD_ERR_NOMEM;
+	st->fresh = f;
+	cap = old;
+	uint64_t *d = rad_mem_grow(&sv->mem, RAD_MEM_LINKS, st->dead, &cap,
+	                           need, sizeof(uint64_t), 64);
+	if (!d)
+		return RAD_ERR_NOMEM;
+	st->dead = d;
+	memset(f + old, 0, (cap - old) * sizeof(uint64_t));
+	memset(d + old, 0, (cap - old) * sizeof(uint64_t));
+	st->cap_bits = cap;
+	return RAD_OK;
+}
+
+void rmb_made_links(rmb_state *st, uint32_t first, uint32_t n)
+{
+	for (uint32_t k = 0; k < n; k++) {
+		rmb_set_bit(st->fresh, first + k, 1);
+		rmb_set_bit(st->dead, first + k, 0);
+	}
+}
+
+void rmb_count_deleted(rad_solver *sv, uint32_t id, rad_status *rs)
 {
 	rmb_state *st = sv->impl;
-	if (l->flags & L_NEW)
+	const rad_link *l = rad_link_at(&sv->h, id);
+	if (rmb_fresh(st, id))
 		return;
 	sv->stats.links_deleted++;
 	if (sv->opt.study && !*rs)

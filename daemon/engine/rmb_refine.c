@@ -7,10 +7,10 @@
  * DESIGN
  * The link hierarchy.  A link that was refined stays in memory as a
  * passive link whose children -- the links its refinement made -- are one
- * run of consecutive records (child, nchild; RAD_LINK_SPLIT_SRC says which
- * end was split).  Active links are the leaves of these trees; the roots
- * are listed in st->roots (with clustering: the root cluster's self-link).
- * Receivers keep no link lists: the walk over the link trees is the
+ * run of consecutive records (its rad_link_ext: child, nchild, and which
+ * end was split; hier.h).  Active links are the leaves of these trees; the
+ * roots are listed in st->roots (with clustering: the root cluster's
+ * self-link). Receivers keep no link lists: the walk over the link trees is the
  * gather.
  *
  * RefineAndGather, in chunks.  The recursive walk of fig. 4.2 runs over
@@ -169,8 +169,8 @@ static uint8_t judge(rad_solver *sv, const void *item, int may_split,
 	uint32_t r = it->rcv, s = it->src;
 	const rad_link *l =
 	        it->link != RAD_NONE ? rad_link_at(h, it->link) : NULL;
-	int fresh = !l || (l->flags & L_NEW);
-	int passive = l && !fresh && l->child != RAD_NONE;
+	int fresh = !l || rmb_fresh(sv->impl, it->link);
+	int passive = l && !fresh && rad_link_passive(l);
 	double b = node_luma_dB(sv, s);
 	if (passive && !may_split)
 		return WAVE_SPLIT; /* cancelled: walk what exists, make nothing
@@ -192,11 +192,11 @@ static uint8_t judge(rad_solver *sv, const void *item, int may_split,
 		return WAVE_SPLIT;
 	int rcv_split = may_split && node_splittable(h, r);
 	if (!fresh) {
-		if (rcv_split &&
-		    rcv_too_coarse(sv, r, link_err(sv, b, l->spread)))
+		float spread = rad_link_spread(h, l);
+		if (rcv_split && rcv_too_coarse(sv, r, link_err(sv, b, spread)))
 			return WAVE_SPLIT_RCV;
 		out->ff = l->ff;
-		out->spread = l->spread;
+		out->spread = spread;
 		return WAVE_LEVEL;
 	}
 	/* A pair that cannot be kept and carries nothing needs no rays. */
@@ -281,13 +281,15 @@ static int coarse_next(const rad_solver *sv, uint32_t r, uint32_t s, double f)
 static rad_status split_item(rad_solver *sv, const rmb_item *it, int rcv_only)
 {
 	rad_hier *h = &sv->h;
+	rmb_state *st = sv->impl;
 	rad_link *l = it->link != RAD_NONE ? rad_link_at(h, it->link) : NULL;
-	if (l && !(l->flags & L_NEW) && l->child != RAD_NONE) {
+	int fresh = l && rmb_fresh(st, it->link);
+	if (l && !fresh && rad_link_passive(l)) {
 		/* A passive link: walk the children it has. */
-		for (uint32_t k = 0; k < l->nchild; k++) {
-			const rad_link *c = rad_link_at(h, l->child + k);
-			rmb_item ci = {c->rcv, c->src, l->child + k, RAD_NONE,
-			               0};
+		uint32_t nc, child = rad_link_child(h, l, &nc);
+		for (uint32_t k = 0; k < nc; k++) {
+			const rad_link *c = rad_link_at(h, child + k);
+			rmb_item ci = {c->rcv, c->src, child + k, RAD_NONE, 0};
 			rad_status rs = push_item(sv, ci);
 			if (rs)
 				return rs;
@@ -313,20 +315,19 @@ static rad_status split_item(rad_solver *sv, const rmb_item *it, int rcv_only)
 	}
 	if (n == 0) {
 		if (l) /* nothing below: carries nothing */
-			l->flags |= L_DEAD;
+			rmb_set_bit(st->dead, it->link, 1);
 		return RAD_OK;
 	}
 	int keepable = l && !rmb_node_black(sv, it->src);
 	if (keepable &&
 	    coarse_next(sv, it->rcv, it->src,
-	                l->flags & L_NEW ? node_ff_estimate(h, it->rcv, it->src)
-	                                 : l->ff))
+	                fresh ? node_ff_estimate(h, it->rcv, it->src) : l->ff))
 		keepable = 0;
 	/* The link cache (Budget): children the budget has no room to
 	 * keep are walked as transient pairs, made again when needed. */
-	const rmb_state *st = sv->impl;
-	if (keepable &&
-	    !wave_room_for(sv, &st->wave, (size_t)n * sizeof(rad_link))) {
+	if (keepable && !wave_room_for(sv, &st->wave,
+	                               (size_t)n * sizeof(rad_link) +
+	                                       sizeof(rad_link_ext))) {
 		keepable = 0;
 		sv->stats.budget_transient += (uint64_t)n;
 	}
@@ -334,18 +335,17 @@ static rad_status split_item(rad_solver *sv, const rmb_item *it, int rcv_only)
 		uint32_t run = rad_pool_add(&h->links, (uint32_t)n);
 		if (run == RAD_NONE)
 			return RAD_ERR_NOMEM;
-		l = rad_link_at(h, it->link); /* the table may have moved */
-		l->child = run;
-		l->nchild = (uint16_t)n;
-		l->flags |= RAD_LINK_PASSIVE;
-		if (side == 2)
-			l->flags |= RAD_LINK_SPLIT_SRC;
+		if (rmb_cover_links(sv, st) ||
+		    rad_link_make_passive(h, it->link, run, (uint32_t)n,
+		                          side == 2)) {
+			rad_pool_release_run(&h->links, run, (uint32_t)n);
+			return RAD_ERR_NOMEM;
+		}
+		rmb_made_links(st, run, (uint32_t)n);
 		for (int k = 0; k < n; k++) {
 			rad_link *c = rad_link_at(h, run + (uint32_t)k);
 			c->rcv = kid[k].rcv;
 			c->src = kid[k].src;
-			c->child = RAD_NONE;
-			c->flags = L_NEW;
 			kid[k].link = run + (uint32_t)k;
 		}
 	} else if (l || it->anc != RAD_NONE) {
@@ -376,17 +376,15 @@ static void free_children(rad_solver *sv, rmb_state *st, uint32_t id,
 {
 	rad_hier *h = &sv->h;
 	rad_link *l = rad_link_at(h, id);
-	if (l->child == RAD_NONE)
+	uint32_t n, child = rad_link_child(h, l, &n);
+	if (n == 0)
 		return;
-	for (uint32_t k = 0; k < l->nchild; k++) {
-		uint32_t c = l->child + k;
-		free_children(sv, st, c, rs);
-		rmb_count_deleted(sv, rad_link_at(h, c), rs);
+	for (uint32_t k = 0; k < n; k++) {
+		free_children(sv, st, child + k, rs);
+		rmb_count_deleted(sv, child + k, rs);
 	}
-	rad_pool_release_run(&h->links, l->child, l->nchild);
-	l->child = RAD_NONE;
-	l->nchild = 0;
-	l->flags &= (uint16_t) ~(RAD_LINK_PASSIVE | RAD_LINK_SPLIT_SRC);
+	rad_pool_release_run(&h->links, child, n);
+	rad_link_make_active(h, rad_link_at(h, id));
 }
 
 /* Items judged at once: enough for the threads, small enough that the
@@ -405,14 +403,14 @@ static rad_status apply(rad_solver *sv, const void *item, const wave_verdict *v)
 	switch (v->action) {
 	case WAVE_DROP:
 		if (l)
-			l->flags |= L_DEAD;
+			rmb_set_bit(st->dead, it->link, 1);
 		break;
 	case WAVE_LEVEL:
 		rs = gather(sv, it->rcv, it->src, v->ff, v->spread, l == NULL);
-		if (l && (l->flags & L_NEW)) {
+		if (l && rmb_fresh(st, it->link)) {
 			l->ff = v->ff;
-			l->spread = v->spread;
-		} else if (l && l->child != RAD_NONE) {
+			rad_link_set_spread(h, l, v->spread);
+		} else if (l && rad_link_passive(l)) {
 			/* A coarser level will do: the subtree goes now, so
 			 * that this walk reuses its records. */
 			free_children(sv, st, it->link, &rs);
@@ -443,10 +441,11 @@ static rad_status run_waves(rad_solver *sv, rmb_state *st)
 
 /* ----------------------------------------------------------- post-order */
 
-/* May a childless link be kept (the creation criterion)? */
-static int storable(const rad_solver *sv, const rad_link *l)
+/* May childless link id be kept (the creation criterion)? */
+static int storable(const rad_solver *sv, const rmb_state *st, uint32_t id)
 {
-	if (l->flags & L_DEAD)
+	const rad_link *l = rad_link_at(&sv->h, id);
+	if (rmb_bit(st->dead, id))
 		return 0;
 	if (node_is_light(l->src) || rmb_node_black(sv, l->src) ||
 	    rmb_node_black(sv, l->rcv))
@@ -463,10 +462,11 @@ static int post(rad_solver *sv, rmb_state *st, uint32_t id, rad_status *rs)
 {
 	rad_hier *h = &sv->h;
 	rad_link *l = rad_link_at(h, id);
-	if (l->child != RAD_NONE && (l->flags & (L_PRUNE | L_DEAD)))
+	if (rad_link_passive(l) && rmb_bit(st->dead, id))
 		free_children(sv, st, id, rs);
-	if (l->child != RAD_NONE) {
-		uint32_t run = l->child, n = l->nchild, kept = 0;
+	uint32_t n, run = rad_link_child(h, rad_link_at(h, id), &n);
+	if (n > 0) {
+		uint32_t kept = 0;
 		uint8_t keep[16];
 		double f = 0, lo = INFINITY, hi = -INFINITY, sum_sp = 0;
 		for (uint32_t k = 0; k < n; k++) {
@@ -474,50 +474,55 @@ static int post(rad_solver *sv, rmb_state *st, uint32_t id, rad_status *rs)
 			kept += keep[k];
 			l = rad_link_at(h, id);
 			const rad_link *c = rad_link_at(h, run + k);
+			double sp = rad_link_spread(h, c);
 			f += child_weight(sv, l, c) * c->ff;
-			lo = fmin(lo, c->ff - 0.5 * c->spread);
-			hi = fmax(hi, c->ff + 0.5 * c->spread);
-			sum_sp += c->spread;
+			lo = fmin(lo, c->ff - 0.5 * sp);
+			hi = fmax(hi, c->ff + 0.5 * sp);
+			sum_sp += sp;
 		}
+		rad_link_ext *x = rad_link_ext_of(h, l);
 		l->ff = (float)f;
 		if (node_is_cluster(l->rcv))
-			l->spread = 0;
-		else if (l->flags & RAD_LINK_SPLIT_SRC)
-			l->spread = (float)sum_sp;
+			x->spread = 0;
+		else if (x->split_src)
+			x->spread = (float)sum_sp;
 		else
-			l->spread = (float)(hi - lo);
+			x->spread = (float)(hi - lo);
 		if (kept == 0) {
 			/* The children were counted (and their subtrees
 			 * freed) by their own post(). */
 			rad_pool_release_run(&h->links, run, n);
-			l->child = RAD_NONE;
-			l->nchild = 0;
-			l->flags &= (uint16_t) ~(RAD_LINK_PASSIVE |
-			                         RAD_LINK_SPLIT_SRC);
+			rad_link_make_active(h, l);
 		} else if (kept < n) {
+			/* Compact the run to its kept links, their bits
+			 * with them. */
 			uint32_t to = run;
 			for (uint32_t k = 0; k < n; k++) {
 				if (!keep[k])
 					continue;
-				if (run + k != to)
+				if (run + k != to) {
 					memcpy(rad_link_at(h, to),
 					       rad_link_at(h, run + k),
 					       sizeof(rad_link));
+					rmb_set_bit(st->fresh, to,
+					            rmb_fresh(st, run + k));
+					rmb_set_bit(st->dead, to,
+					            rmb_bit(st->dead, run + k));
+				}
 				to++;
 			}
 			rad_pool_release_run(&h->links, to, n - kept);
-			l->nchild = (uint16_t)kept;
+			x->nchild = (uint16_t)kept;
 		}
 		if (kept) {
-			l->flags &= (uint16_t) ~(L_DEAD | L_PRUNE);
+			rmb_set_bit(st->dead, id, 0);
 			return 1;
 		}
 	}
-	/* New links still carry L_NEW: count_tree() counts them. */
-	int keep = storable(sv, l);
-	l->flags &= (uint16_t)~L_PRUNE;
+	/* Fresh links stay fresh: count_tree() counts them. */
+	int keep = storable(sv, st, id);
 	if (!keep)
-		rmb_count_deleted(sv, l, rs);
+		rmb_count_deleted(sv, id, rs);
 	return keep;
 }
 
@@ -572,7 +577,11 @@ static rad_status new_root(rad_solver *sv, uint32_t r, uint32_t s, id_vec *ids)
 		it.link = rad_link_new(&sv->h, r, s, 0, 0);
 		if (it.link == RAD_NONE)
 			return RAD_ERR_NOMEM;
-		rad_link_at(&sv->h, it.link)->flags = L_NEW;
+		if (rmb_cover_links(sv, sv->impl)) {
+			rad_pool_release(&sv->h.links, it.link);
+			return RAD_ERR_NOMEM;
+		}
+		rmb_made_links(sv->impl, it.link, 1);
 		ids->v[ids->n++] = it.link;
 	}
 	return push_item(sv, it);

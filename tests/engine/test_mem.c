@@ -261,6 +261,68 @@ static void expect_planted(rad_hier *h, uint32_t *field, const char *part)
 	*field ^= 1;
 }
 
+/* h: the hierarchy of s with rmb's links, counted in a fresh mem. */
+static void rmb_hier(const rad_scene *s, rad_mem *mem, rad_hier *h)
+{
+	rad_error err;
+	rad_mem_init(mem);
+	assert_int_equal(rad_hier_init(h, s, mem, 0.0, sizeof(rad_link), &err),
+	                 RAD_OK);
+}
+
+/*
+ * rmb's links (hier.h): an active link is 16 bytes, its spread in the
+ * record; a passive one names a record of links_ext that holds its
+ * children's run and its spread, and gives it back when it turns active
+ * again.  What the pools hold is counted under "links".
+ */
+static void test_link_records(void **state)
+{
+	(void)state;
+	rad_scene *s = make_room();
+	rad_mem mem;
+	rad_hier h;
+	rmb_hier(s, &mem, &h);
+	assert_int_equal(sizeof(rad_link), 16);
+	uint32_t id = rad_link_new(&h, 0, RAD_TAG_CLUSTER, 0.25f, 0.125f);
+	assert_int_not_equal(id, RAD_NONE);
+	rad_link *l = rad_link_at(&h, id);
+	assert_false(rad_link_passive(l));
+	assert_true(rad_link_spread(&h, l) == 0.125f);
+	uint32_t n, run = rad_link_child(&h, l, &n);
+	assert_int_equal(run, RAD_NONE);
+	assert_int_equal(n, 0);
+	/* A spread is never negative, -0 or NaN: the sign bit is the
+	 * passive mark. */
+	rad_link_set_spread(&h, l, -0.0f);
+	assert_int_equal(l->aux, 0);
+	rad_link_set_spread(&h, l, NAN);
+	assert_int_equal(l->aux, 0);
+	rad_link_set_spread(&h, l, 0.5f);
+	int64_t before = mem.bytes[RAD_MEM_LINKS];
+	uint32_t kids = rad_pool_add(&h.links, 3);
+	assert_int_not_equal(kids, RAD_NONE);
+	assert_int_equal(rad_link_make_passive(&h, id, kids, 3, 1), RAD_OK);
+	l = rad_link_at(&h, id);
+	assert_true(rad_link_passive(l));
+	assert_true(rad_link_spread(&h, l) == 0.5f);
+	assert_int_equal(rad_link_child(&h, l, &n), kids);
+	assert_int_equal(n, 3);
+	assert_int_equal(rad_link_ext_of(&h, l)->split_src, 1);
+	assert_true(mem.bytes[RAD_MEM_LINKS] > before);
+	rad_link_set_spread(&h, l, 2.0f);
+	assert_true(rad_link_ext_of(&h, l)->spread == 2.0f);
+	assert_true(l->ff == 0.25f);
+	rad_pool_release_run(&h.links, kids, 3);
+	rad_link_make_active(&h, l);
+	assert_false(rad_link_passive(l));
+	assert_true(rad_link_spread(&h, l) == 2.0f);
+	assert_int_equal(rad_pool_live(&h.links_ext), 0);
+	rad_hier_destroy(&h);
+	assert_int_equal(mem.bytes[RAD_MEM_LINKS], 0);
+	rad_scene_free(s);
+}
+
 /*
  * Elements hold no geometry (hier.h, Regions): each quarter's region is
  * the one rad_region_quarter makes of its parent's, bit for bit, on a
@@ -290,11 +352,8 @@ static void test_elem_regions_derived(void **state)
 	assert_int_equal(s->npolys, 2);
 	assert_int_not_equal(s->polys[0].quad, s->polys[1].quad);
 	rad_mem mem;
-	rad_mem_init(&mem);
 	rad_hier h;
-	assert_int_equal(
-	        rad_hier_init(&h, s, &mem, 0.0, sizeof(rad_link), &err),
-	        RAD_OK);
+	rmb_hier(s, &mem, &h);
 	for (uint32_t root = 0; root < 2; root++) {
 		uint32_t id = root;
 		while (rad_elem_can_split(&h, rad_elem_at(&h, id))) {
@@ -767,6 +826,7 @@ int main(void)
 	        cmocka_unit_test(test_solver_alloc_failure_is_clean),
 	        cmocka_unit_test(test_hier_invariants),
 	        cmocka_unit_test(test_elem_regions_derived),
+	        cmocka_unit_test(test_link_records),
 	        cmocka_unit_test(test_limit_refuses_cleanly),
 	        cmocka_unit_test(test_budget_holds),
 	        cmocka_unit_test(test_compact_bvh_same_results),
