@@ -196,15 +196,10 @@ static rad_status build_cluster(rad_hier *h, uint32_t c, const double *ctr,
 	cl->area = (float)area;
 	for (int k = 0; k < 3; k++)
 		cl->n[k] = (float)n[k];
-	for (int k = 0; k < 6; k++)
-		cl->m[k] = (float)m[k];
-	cl->q = 0; /* a leaf's projected area is summed exactly */
 	cl->child = RAD_NONE;
 	cl->links = RAD_NONE;
 	if (cl->count <= RAD_CLUSTER_LEAF_MAX)
-		return RAD_OK;
-	double rg = sphere_mean_sqrt(m);
-	cl->q = rg > 0 ? (float)(area / (2 * rg)) : 0;
+		return RAD_OK; /* its projected area is summed exactly */
 	int axis = 0;
 	for (int k = 1; k < 3; k++)
 		if (chi[k] - clo[k] > chi[axis] - clo[axis])
@@ -216,8 +211,18 @@ static rad_status build_cluster(rad_hier *h, uint32_t c, const double *ctr,
 	if (kids == RAD_NONE)
 		return rad_fail(err, RAD_ERR_NOMEM,
 		                "cluster tree: out of memory");
+	if ((kids - 1) / 2 >= h->nmom) /* inner_clusters miscounted */
+		return rad_fail(err, RAD_ERR_STATE,
+		                "cluster tree: more inner clusters than the "
+		                "%u counted",
+		                h->nmom);
 	cl = rad_cluster_at(h, c); /* records never move; reload for clarity */
 	cl->child = kids;
+	rad_cluster_mom *mo = &h->mom[rad_cluster_mom_index(cl)];
+	for (int k = 0; k < 6; k++)
+		mo->m[k] = (float)m[k];
+	double rg = sphere_mean_sqrt(m);
+	mo->q = rg > 0 ? (float)(area / (2 * rg)) : 0;
 	rad_cluster *a = rad_cluster_at(h, kids),
 	            *b = rad_cluster_at(h, kids + 1);
 	a->first = first;
@@ -228,16 +233,32 @@ static rad_status build_cluster(rad_hier *h, uint32_t c, const double *ctr,
 	return st ? st : build_cluster(h, kids + 1, ctr, err);
 }
 
+/* Inner clusters of a tree over n polygons (build_cluster's rule). */
+static uint32_t inner_clusters(uint32_t n)
+{
+	if (n <= RAD_CLUSTER_LEAF_MAX)
+		return 0;
+	return 1 + inner_clusters(n / 2) + inner_clusters(n - n / 2);
+}
+
 /* The cluster tree over every polygon, from root cluster 0 (range set).
- * The centroids every level sorts by are computed once (SCRATCH). */
+ * The centroids every level sorts by are computed once (SCRATCH).  The
+ * models: one per inner cluster, and one more, since the pool may skip
+ * one record where a pair would straddle the end of its first block
+ * (later blocks hold an even number of records from an even id). */
 static rad_status build_clusters(rad_hier *h, rad_error *err)
 {
 	const rad_scene *s = h->scene;
+	h->nmom = inner_clusters(s->npolys) + 1;
+	h->mom = rad_mem_alloc(h->mem, RAD_MEM_ELEM_CLUSTER,
+	                       h->nmom * sizeof(rad_cluster_mom));
 	double *ctr = rad_mem_alloc(h->mem, RAD_MEM_SCRATCH,
 	                            3 * (size_t)s->npolys * sizeof(double));
-	if (!ctr)
+	if (!h->mom || !ctr) {
+		rad_mem_free(h->mem, RAD_MEM_SCRATCH, ctr);
 		return rad_fail(err, RAD_ERR_NOMEM,
 		                "cluster tree: out of memory");
+	}
 	for (uint32_t i = 0; i < s->npolys; i++) {
 		v3 c = poly_centroid(s, &s->polys[i]);
 		ctr[3 * (size_t)i] = c.x;
@@ -350,6 +371,9 @@ void rad_hier_destroy(rad_hier *h)
 	rad_pool_destroy(&h->links_ext);
 	rad_mem_free(h->mem, RAD_MEM_ELEM_CLUSTER, h->order);
 	h->order = NULL;
+	rad_mem_free(h->mem, RAD_MEM_ELEM_CLUSTER, h->mom);
+	h->mom = NULL;
+	h->nmom = 0;
 }
 
 static double poly_edge(const rad_scene *s, const rad_poly *p)
@@ -783,14 +807,16 @@ void rad_link_make_active(rad_hier *h, rad_link *l)
 	rad_link_set_spread(h, l, spread);
 }
 
-/* The moment model of one cluster (hier.h). */
-static double proj_model(const rad_cluster *c, double dx, double dy, double dz)
+/* The moment model of inner cluster c (hier.h). */
+static double proj_model(const rad_hier *h, const rad_cluster *c, double dx,
+                         double dy, double dz)
 {
-	const float *m = c->m;
+	const rad_cluster_mom *mo = &h->mom[rad_cluster_mom_index(c)];
+	const float *m = mo->m;
 	double q = m[0] * dx * dx + m[1] * dy * dy + m[2] * dz * dz +
 	           2 * (m[3] * dx * dy + m[4] * dx * dz + m[5] * dy * dz);
 	double odd = c->n[0] * dx + c->n[1] * dy + c->n[2] * dz;
-	return fmax(0, 0.5 * (odd + c->q * sqrt(fmax(q, 0))));
+	return fmax(0, 0.5 * (odd + mo->q * sqrt(fmax(q, 0))));
 }
 
 static double proj_at(const rad_hier *h, const rad_cluster *c, double dx,
@@ -806,7 +832,7 @@ static double proj_at(const rad_hier *h, const rad_cluster *c, double dx,
 		return p;
 	}
 	if (depth == 0)
-		return proj_model(c, dx, dy, dz);
+		return proj_model(h, c, dx, dy, dz);
 	const rad_cluster *k = rad_cluster_at(h, c->child | RAD_TAG_CLUSTER);
 	return proj_at(h, k, dx, dy, dz, depth - 1) +
 	       proj_at(h, k + 1, dx, dy, dz, depth - 1);

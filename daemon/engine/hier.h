@@ -175,18 +175,34 @@ typedef struct rad_elem {
 } rad_elem;
 
 typedef struct rad_cluster {
-	float lo[3], hi[3]; /* bounding box of the contents */
-	float area;         /* total area of the polygons inside */
-	float n[3];         /* sum of area x unit normal, |n| <= area */
-	float m[6];         /* sum of area x n n^T: xx yy zz xy xz yz */
-	float q;            /* scale of the even part (DESIGN); 0 on leaves */
-	uint32_t child;     /* first of 2 child clusters, RAD_NONE = leaf */
+	float lo[3], hi[3];    /* bounding box of the contents */
+	float area;            /* total area of the polygons inside */
+	float n[3];            /* sum of area x unit normal, |n| <= area */
+	uint32_t child;        /* first of 2 child clusters, RAD_NONE = leaf */
 	uint32_t first, count; /* range of order[] covered */
 	uint32_t links;        /* head of the links received */
 	float B[3], I[3], dB[3];
 	float V[3], S;       /* where I came from (DESIGN, push); with I */
 	float nB[3], ndB[3]; /* sum of area x luma(B or dB) x normal (pull) */
 } rad_cluster;
+
+/* The moment model of an inner cluster (DESIGN).  A leaf's projected
+ * area is summed over its polygons and needs none, so the models are an
+ * array of their own, one per pair of child clusters: half the tree's
+ * clusters are leaves, and the model was 28 of the 160 bytes every
+ * cluster had. */
+typedef struct rad_cluster_mom {
+	float m[6]; /* sum of area x n n^T: xx yy zz xy xz yz */
+	float q;    /* scale of the even part */
+} rad_cluster_mom;
+
+/* Index of inner cluster c's model in rad_hier.mom: its children's pair
+ * (ids child, child+1; every pair starts at least 2 after the one
+ * before, so no two inner clusters share one). */
+static inline uint32_t rad_cluster_mom_index(const rad_cluster *c)
+{
+	return (c->child - 1) / 2;
+}
 
 /* A link of the reduced-memory solver (rmb), active or passive. */
 typedef struct rad_link {
@@ -222,21 +238,24 @@ _Static_assert(sizeof(rad_elem) == 56, "rad_elem grew");
 _Static_assert(sizeof(rad_link) == 16, "rad_link grew");
 _Static_assert(sizeof(rad_link_ext) == 12, "rad_link_ext grew");
 _Static_assert(sizeof(rad_hlink) == 16, "rad_hlink grew");
-_Static_assert(sizeof(rad_cluster) == 160, "rad_cluster grew");
+_Static_assert(sizeof(rad_cluster) == 132, "rad_cluster grew");
+_Static_assert(sizeof(rad_cluster_mom) == 28, "rad_cluster_mom grew");
 
 typedef struct rad_hier {
 	const rad_scene *scene;
-	rad_mem *mem;       /* the owning solver's counters */
-	rad_pool elems;     /* rad_elem, ELEM_SURFACE */
-	rad_pool clusters;  /* rad_cluster, ELEM_CLUSTER */
-	rad_pool links;     /* rad_link, or rad_hlink for hr; LINKS */
-	rad_pool links_ext; /* rad_link_ext of passive rad_links; LINKS */
-	uint32_t *order;    /* polygon ids in cluster order, ELEM_CLUSTER */
-	uint32_t nleaves;   /* surface leaves */
-	double min_edge;    /* elements with a longer edge may split */
-	uint64_t splits;    /* element splits since last reset */
-	uint64_t gen;       /* unique per rad_hier_init (0: none), the key of
-	                       rad_elem_patch_id's memo */
+	rad_mem *mem;         /* the owning solver's counters */
+	rad_pool elems;       /* rad_elem, ELEM_SURFACE */
+	rad_pool clusters;    /* rad_cluster, ELEM_CLUSTER */
+	rad_pool links;       /* rad_link, or rad_hlink for hr; LINKS */
+	rad_pool links_ext;   /* rad_link_ext of passive rad_links; LINKS */
+	uint32_t *order;      /* polygon ids in cluster order, ELEM_CLUSTER */
+	rad_cluster_mom *mom; /* inner clusters' models, ELEM_CLUSTER */
+	uint32_t nmom;        /* entries (rad_cluster_mom_index below it) */
+	uint32_t nleaves;     /* surface leaves */
+	double min_edge;      /* elements with a longer edge may split */
+	uint64_t splits;      /* element splits since last reset */
+	uint64_t gen;         /* unique per rad_hier_init (0: none), the key of
+	                         rad_elem_patch_id's memo */
 } rad_hier;
 
 static inline rad_elem *rad_elem_at(const rad_hier *h, uint32_t id)

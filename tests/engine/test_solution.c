@@ -218,6 +218,15 @@ static void test_solution_bad_bytes_refused(void **state)
 	memcpy(c, b, len);
 	c[0] ^= 0xff;
 	expect_refused(s, c, len, "magic");
+	/* The last inner cluster's model ends where the cluster order
+	 * (a uint32_t per polygon) starts: a NaN in its q. */
+	memcpy(c, b, len);
+	rad_scene_counts n;
+	rad_scene_counts_get(s, &n);
+	float nan = NAN;
+	memcpy(c + len - n.polygons * sizeof(uint32_t) - sizeof(float), &nan,
+	       sizeof nan);
+	expect_refused(s, c, len, "model is damaged");
 	free(c);
 
 	/* Another scene (a box) with the Cornell box's bytes. */
