@@ -197,7 +197,6 @@ static rad_status build_cluster(rad_hier *h, uint32_t c, const double *ctr,
 	for (int k = 0; k < 3; k++)
 		cl->n[k] = (float)n[k];
 	cl->child = RAD_NONE;
-	cl->links = RAD_NONE;
 	if (cl->count <= RAD_CLUSTER_LEAF_MAX)
 		return RAD_OK; /* its projected area is summed exactly */
 	int axis = 0;
@@ -306,8 +305,15 @@ int rad_elem_keep_exposed(const rad_hier *h, uint32_t id, v3 *pts, v3 *nrm,
 	        rad_hier_cover_dist(h, e->poly), pts, nrm, n, rays);
 }
 
+/* hr's list heads: every one of the n nodes from first on has none. */
+static void no_links(uint32_t *heads, uint32_t n)
+{
+	for (uint32_t k = 0; k < n; k++)
+		heads[k] = RAD_NONE;
+}
+
 rad_status rad_hier_init(rad_hier *h, const rad_scene *s, rad_mem *mem,
-                         double min_edge, uint32_t link_size, rad_error *err)
+                         double min_edge, int lists, rad_error *err)
 {
 	static _Atomic uint64_t next_gen = 1;
 	memset(h, 0, sizeof(*h));
@@ -326,8 +332,13 @@ rad_status rad_hier_init(rad_hier *h, const rad_scene *s, rad_mem *mem,
 	              shift, n);
 	rad_pool_init(&h->clusters, mem, RAD_MEM_ELEM_CLUSTER,
 	              sizeof(rad_cluster), shift, 0);
-	rad_pool_init(&h->links, mem, RAD_MEM_LINKS, link_size,
+	h->lists = lists;
+	rad_pool_init(&h->links, mem, RAD_MEM_LINKS,
+	              lists ? sizeof(rad_hlink) : sizeof(rad_link),
 	              shift < 10 ? shift + 2 : 12, 0);
+	/* The same blocks as elems': the same ids for the same adds. */
+	rad_pool_init(&h->heads, mem, RAD_MEM_LINKS, sizeof(uint32_t), shift,
+	              n);
 	rad_pool_init(&h->links_ext, mem, RAD_MEM_LINKS, sizeof(rad_link_ext),
 	              shift < 10 ? shift + 1 : 11, 0);
 	if (n == 0)
@@ -335,6 +346,7 @@ rad_status rad_hier_init(rad_hier *h, const rad_scene *s, rad_mem *mem,
 	h->order =
 	        rad_mem_alloc(mem, RAD_MEM_ELEM_CLUSTER, n * sizeof(uint32_t));
 	if (!h->order || rad_pool_add(&h->elems, n) != 0 ||
+	    (lists && rad_pool_add(&h->heads, n) != 0) ||
 	    rad_pool_add(&h->clusters, 1) != 0) {
 		rad_hier_destroy(h);
 		return rad_fail(err, RAD_ERR_NOMEM, "hierarchy: out of memory");
@@ -342,7 +354,9 @@ rad_status rad_hier_init(rad_hier *h, const rad_scene *s, rad_mem *mem,
 	for (uint32_t i = 0; i < n; i++) {
 		rad_elem *e = rad_elem_at(h, i);
 		e->poly = i;
-		e->child = e->links = RAD_NONE;
+		e->child = RAD_NONE;
+		if (lists)
+			*(uint32_t *)rad_pool_at(&h->heads, i) = RAD_NONE;
 		e->exposed = RAD_EXPOSED_ALL;
 		h->order[i] = i;
 	}
@@ -355,6 +369,16 @@ rad_status rad_hier_init(rad_hier *h, const rad_scene *s, rad_mem *mem,
 	root->first = 0;
 	root->count = n;
 	rad_status st = build_clusters(h, err);
+	if (!st && lists) {
+		h->cluster_heads =
+		        rad_mem_alloc(mem, RAD_MEM_LINKS,
+		                      h->clusters.count * sizeof(uint32_t));
+		if (h->cluster_heads)
+			no_links(h->cluster_heads, h->clusters.count);
+		else
+			st = rad_fail(err, RAD_ERR_NOMEM,
+			              "hierarchy: out of memory");
+	}
 	if (st) {
 		rad_hier_destroy(h);
 		return st;
@@ -369,6 +393,9 @@ void rad_hier_destroy(rad_hier *h)
 	rad_pool_destroy(&h->clusters);
 	rad_pool_destroy(&h->links);
 	rad_pool_destroy(&h->links_ext);
+	rad_pool_destroy(&h->heads);
+	rad_mem_free(h->mem, RAD_MEM_LINKS, h->cluster_heads);
+	h->cluster_heads = NULL;
 	rad_mem_free(h->mem, RAD_MEM_ELEM_CLUSTER, h->order);
 	h->order = NULL;
 	rad_mem_free(h->mem, RAD_MEM_ELEM_CLUSTER, h->mom);
@@ -466,11 +493,21 @@ uint32_t rad_elem_split(rad_hier *h, uint32_t id)
 	uint32_t c = rad_pool_add(&h->elems, 4);
 	if (c == RAD_NONE)
 		return RAD_NONE;
+	if (h->lists) {
+		uint32_t hc = rad_pool_add(&h->heads, 4);
+		if (hc != c) { /* out of memory (the pools stay in step) */
+			rad_pool_release_run(&h->elems, c, 4);
+			if (hc != RAD_NONE)
+				rad_pool_release_run(&h->heads, hc, 4);
+			return RAD_NONE;
+		}
+		no_links(rad_pool_at(&h->heads, c), 4);
+	}
 	e = rad_elem_at(h, id);
 	for (int k = 0; k < 4; k++) {
 		rad_elem *ch = rad_elem_at(h, c + (uint32_t)k);
 		ch->poly = e->poly;
-		ch->child = ch->links = RAD_NONE;
+		ch->child = RAD_NONE;
 		memcpy(ch->B, e->B, sizeof(ch->B));
 		memcpy(ch->dB, e->dB, sizeof(ch->dB));
 		ch->level = (uint8_t)(e->level + 1);
@@ -858,9 +895,9 @@ double rad_cluster_emit(const rad_cluster *c, int delta, double p, double dx,
 	return e / p > 4 ? 4 : e / p;
 }
 
-uint32_t *rad_node_links(rad_hier *h, uint32_t tagged)
+uint32_t *rad_node_links(const rad_hier *h, uint32_t tagged)
 {
 	if (tagged & RAD_TAG_CLUSTER)
-		return &rad_cluster_at(h, tagged)->links;
-	return &rad_elem_at(h, tagged)->links;
+		return &h->cluster_heads[tagged & ~RAD_TAG_MASK];
+	return rad_pool_at(&h->heads, tagged);
 }

@@ -16,7 +16,9 @@
  *   - links: receiver <- source transfers with their form factor, of
  *     one of two kinds, the pool's records being the solver's.  Classic
  *     HR (rad_hlink, 16 bytes) chains them on their receiver's list, which
- *     says whose they are, and frees refined links.  The reduced-memory
+ *     says whose they are, and frees refined links; the lists' heads are
+ *     hr's alone (rad_hier.heads, cluster_heads), not a field of every
+ *     element and cluster record.  The reduced-memory
  *     solver (rad_link, 16 bytes) keeps no lists; a link names both its
  *     ends, and a refined (passive) one keeps its children (consecutive
  *     records) for the link hierarchy.  Only passive links have
@@ -72,8 +74,9 @@
  * 1/65536 of its polygon's, where the default min_edge stops refinement
  * at 1/200 of the scene's diagonal.  Storing the region (36 bytes) and
  * the area made an element 96 bytes.  Nor does an element keep its
- * parent: the walks come down the trees, and progressive's fresh
- * children carry theirs.  It is 56 bytes.
+ * parent (the walks come down the trees, and progressive's fresh
+ * children carry theirs) or hr's list head (rad_hier.heads).  It is 52
+ * bytes.
  * Covered parts.  Scenes lay panels, windows, luminaires and boards a
  * few millimetres in front of walls and ceilings.  The part of a surface
  * behind such a cover takes no light and sends none, and an element that
@@ -166,7 +169,6 @@
 typedef struct rad_elem {
 	uint32_t poly;           /* root polygon (geometry, material, normal) */
 	uint32_t child;          /* first of 4 children, RAD_NONE for a leaf */
-	uint32_t links;          /* head of the links received, or RAD_NONE */
 	float B[3], I[3], dB[3]; /* see DESIGN */
 	uint32_t path;           /* quarter taken at each level (Regions) */
 	uint8_t level;           /* depth below the polygon root */
@@ -180,7 +182,6 @@ typedef struct rad_cluster {
 	float n[3];            /* sum of area x unit normal, |n| <= area */
 	uint32_t child;        /* first of 2 child clusters, RAD_NONE = leaf */
 	uint32_t first, count; /* range of order[] covered */
-	uint32_t links;        /* head of the links received */
 	float B[3], I[3], dB[3];
 	float V[3], S;       /* where I came from (DESIGN, push); with I */
 	float nB[3], ndB[3]; /* sum of area x luma(B or dB) x normal (pull) */
@@ -234,20 +235,27 @@ typedef struct rad_hlink {
 } rad_hlink;
 
 /* Sizes the memory study measures by (Regions; links above). */
-_Static_assert(sizeof(rad_elem) == 56, "rad_elem grew");
+_Static_assert(sizeof(rad_elem) == 52, "rad_elem grew");
 _Static_assert(sizeof(rad_link) == 16, "rad_link grew");
 _Static_assert(sizeof(rad_link_ext) == 12, "rad_link_ext grew");
 _Static_assert(sizeof(rad_hlink) == 16, "rad_hlink grew");
-_Static_assert(sizeof(rad_cluster) == 132, "rad_cluster grew");
+_Static_assert(sizeof(rad_cluster) == 128, "rad_cluster grew");
 _Static_assert(sizeof(rad_cluster_mom) == 28, "rad_cluster_mom grew");
 
 typedef struct rad_hier {
 	const rad_scene *scene;
-	rad_mem *mem;         /* the owning solver's counters */
-	rad_pool elems;       /* rad_elem, ELEM_SURFACE */
-	rad_pool clusters;    /* rad_cluster, ELEM_CLUSTER */
-	rad_pool links;       /* rad_link, or rad_hlink for hr; LINKS */
-	rad_pool links_ext;   /* rad_link_ext of passive rad_links; LINKS */
+	rad_mem *mem;       /* the owning solver's counters */
+	rad_pool elems;     /* rad_elem, ELEM_SURFACE */
+	rad_pool clusters;  /* rad_cluster, ELEM_CLUSTER */
+	rad_pool links;     /* rad_link, or rad_hlink for hr; LINKS */
+	rad_pool links_ext; /* rad_link_ext of passive rad_links; LINKS */
+	/* hr: the head of each node's list of links received (RAD_NONE:
+	 * none), LINKS: elements' in a pool made in step with elems (the
+	 * same ids), clusters' an array.  Without lists (other solvers)
+	 * both are empty. */
+	int lists;
+	rad_pool heads;
+	uint32_t *cluster_heads;
 	uint32_t *order;      /* polygon ids in cluster order, ELEM_CLUSTER */
 	rad_cluster_mom *mom; /* inner clusters' models, ELEM_CLUSTER */
 	uint32_t nmom;        /* entries (rad_cluster_mom_index below it) */
@@ -327,11 +335,12 @@ double rad_hier_cover_dist(const rad_hier *h, uint32_t poly);
 
 /*
  * Build the polygon roots and the cluster tree.  min_edge in metres;
- * link_size the solver's link record (sizeof rad_link or rad_hlink).
- * On failure everything allocated is released.
+ * lists: 1 for classic HR's links (rad_hlink, on their receivers' lists),
+ * 0 for the others' (rad_link).  On failure everything allocated is
+ * released.
  */
 rad_status rad_hier_init(rad_hier *h, const rad_scene *s, rad_mem *mem,
-                         double min_edge, uint32_t link_size, rad_error *err);
+                         double min_edge, int lists, rad_error *err);
 void rad_hier_destroy(rad_hier *h);
 /*
  * Check the trees and link lists (hier_check.c): 0, or -1 with msg naming
@@ -501,6 +510,6 @@ static inline void rad_cluster_took(rad_cluster *c, double e, double dx,
 }
 
 /* Head pointer of a node's received-links list (element or cluster). */
-uint32_t *rad_node_links(rad_hier *h, uint32_t tagged);
+uint32_t *rad_node_links(const rad_hier *h, uint32_t tagged);
 
 #endif

@@ -68,7 +68,7 @@ static int check_elem(checker *c, uint32_t id)
 {
 	const rad_hier *h = c->h;
 	const rad_elem *e = rad_elem_at(h, id);
-	if (check_links(c, e->links, id) != 0)
+	if (h->lists && check_links(c, *rad_node_links(h, id), id) != 0)
 		return -1;
 	if (e->child == RAD_NONE) {
 		c->leaves++;
@@ -96,7 +96,8 @@ static int check_cluster(checker *c, uint32_t id, unsigned depth)
 	const rad_cluster *cl = rad_cluster_at(h, id);
 	if (depth > 64)
 		return fail(c, "cluster tree deeper than 64", id);
-	if (check_links(c, cl->links, id | RAD_TAG_CLUSTER) != 0)
+	if (h->lists && check_links(c, *rad_node_links(h, id | RAD_TAG_CLUSTER),
+	                            id | RAD_TAG_CLUSTER) != 0)
 		return -1;
 	if (cl->child == RAD_NONE)
 		return 0;

@@ -131,7 +131,7 @@ static void gather_list(gather_job *g, uint32_t rcv, uint32_t head, float I[3],
 static void gather_tree(gather_job *g, uint32_t id, double took[3])
 {
 	rad_elem *e = rad_elem_at(g->h, id);
-	gather_list(g, id, e->links, e->I, took);
+	gather_list(g, id, *rad_node_links(g->h, id), e->I, took);
 	if (e->child != RAD_NONE)
 		for (uint32_t k = 0; k < 4; k++)
 			gather_tree(g, e->child + k, took);
@@ -163,7 +163,8 @@ static void gather_clusters(gather_job *g, uint32_t id, double took[3])
 	rad_cluster *cl = rad_cluster_at(g->h, id);
 	memset(cl->V, 0, sizeof(cl->V));
 	cl->S = 0;
-	gather_list(g, id | RAD_TAG_CLUSTER, cl->links, cl->I, took);
+	gather_list(g, id | RAD_TAG_CLUSTER,
+	            *rad_node_links(g->h, id | RAD_TAG_CLUSTER), cl->I, took);
 	if (cl->child != RAD_NONE) {
 		gather_clusters(g, cl->child, took);
 		gather_clusters(g, cl->child + 1, took);

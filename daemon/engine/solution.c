@@ -34,12 +34,12 @@
 
 #define SOL_MAGIC 0x534c5852u /* "RXLS" little-endian: "luxrad solution" */
 #define SOL_VERSION                                                            \
-	8u /* 2: clusters carry their orientation moments; 3:                  \
+	9u /* 2: clusters carry their orientation moments; 3:                  \
 	    * and where their irradiance came from; 4: elements their          \
 	    * exposed fraction (hier.h, Covered parts); 5: their path, not     \
 	    * their region (hier.h, Regions); 6: clusters no parent; 7: nor    \
 	    * elements; 8: the moments of inner clusters only, after the       \
-	    * cluster records */
+	    * cluster records; 9: no list heads in elements and clusters */
 
 struct rad_solution {
 	const rad_scene *scene;
@@ -162,7 +162,6 @@ static uint32_t copy_elems(const rad_hier *src, rad_hier *dst)
 		out[p] = *rad_elem_at(src, p);
 	for (uint32_t i = 0; i < next; i++) {
 		rad_elem *e = &out[i];
-		e->links = RAD_NONE;
 		if (e->child == RAD_NONE) {
 			leaves++;
 			continue;
@@ -183,7 +182,6 @@ static void copy_clusters(const rad_hier *src, rad_hier *dst)
 	out[0] = *rad_cluster_at(src, 0);
 	for (uint32_t i = 0; i < next; i++) {
 		rad_cluster *c = &out[i];
-		c->links = RAD_NONE;
 		if (c->child == RAD_NONE)
 			continue;
 		uint32_t first = next;

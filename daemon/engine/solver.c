@@ -64,10 +64,7 @@ rad_status rad_solver_new(const rad_scene *scene, const rad_options *opt,
 	if (!st)
 		st = rad_hier_init(&sv->h, scene, &sv->mem,
 		                   opt->min_edge_rel * scene->diag,
-		                   opt->solver == RAD_SOLVER_HR
-		                           ? sizeof(rad_hlink)
-		                           : sizeof(rad_link),
-		                   err);
+		                   opt->solver == RAD_SOLVER_HR, err);
 	if (!st)
 		st = sv->ops->init(sv, err);
 	if (st == RAD_ERR_NOMEM && atomic_load(&sv->mem.budget_refusals))

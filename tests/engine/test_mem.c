@@ -266,8 +266,7 @@ static void rmb_hier(const rad_scene *s, rad_mem *mem, rad_hier *h)
 {
 	rad_error err;
 	rad_mem_init(mem);
-	assert_int_equal(rad_hier_init(h, s, mem, 0.0, sizeof(rad_link), &err),
-	                 RAD_OK);
+	assert_int_equal(rad_hier_init(h, s, mem, 0.0, 0, &err), RAD_OK);
 }
 
 /*
@@ -422,14 +421,15 @@ static void test_hier_invariants(void **state)
 				rad_elem *e = rad_elem_at(h, i);
 				if (e->child != RAD_NONE && split == RAD_NONE)
 					split = i;
-				if (e->links != RAD_NONE && linked == RAD_NONE)
+				if (*rad_node_links(h, i) != RAD_NONE &&
+				    linked == RAD_NONE)
 					linked = i;
 			}
 			assert_true(split != RAD_NONE && linked != RAD_NONE);
 			rad_elem *ch =
 			        rad_elem_at(h, rad_elem_at(h, split)->child);
 			rad_hlink *l =
-			        rad_hlink_at(h, rad_elem_at(h, linked)->links);
+			        rad_hlink_at(h, *rad_node_links(h, linked));
 			expect_planted(h, &ch->poly, "disowns its parent");
 			expect_planted(h, &h->nleaves, "nleaves");
 			uint32_t src = l->src;
