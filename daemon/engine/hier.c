@@ -305,7 +305,7 @@ int rad_elem_keep_exposed(const rad_hier *h, uint32_t id, v3 *pts, v3 *nrm,
 	        rad_hier_cover_dist(h, e->poly), pts, nrm, n, rays);
 }
 
-/* hr's list heads: every one of the n nodes from first on has none. */
+/* hr's list heads: none of the n nodes at heads has a link yet. */
 static void no_links(uint32_t *heads, uint32_t n)
 {
 	for (uint32_t k = 0; k < n; k++)
@@ -835,8 +835,9 @@ rad_status rad_link_make_passive(rad_hier *h, uint32_t id, uint32_t child,
 	return RAD_OK;
 }
 
-void rad_link_make_active(rad_hier *h, rad_link *l)
+void rad_link_make_active(rad_hier *h, uint32_t id)
 {
+	rad_link *l = rad_link_at(h, id);
 	uint32_t x = l->aux & ~RAD_LINK_EXT;
 	float spread = rad_link_ext_of(h, l)->spread;
 	rad_pool_release(&h->links_ext, x);

@@ -476,8 +476,8 @@ static inline uint32_t rad_link_child(const rad_hier *h, const rad_link *l,
  * spread kept); RAD_ERR_NOMEM when the ext pool cannot grow. */
 rad_status rad_link_make_passive(rad_hier *h, uint32_t id, uint32_t child,
                                  uint32_t n, int split_src);
-/* Make passive link l active again (the run is the caller's to free). */
-void rad_link_make_active(rad_hier *h, rad_link *l);
+/* Make passive link id active again (the run is the caller's to free). */
+void rad_link_make_active(rad_hier *h, uint32_t id);
 /* Projected area of a cluster's polygons in unit direction d (DESIGN):
  * exact over a leaf cluster's polygons, the moment model RAD_PROJ_DEPTH
  * levels below an inner one (the sum of up to 4 models, each exact if it

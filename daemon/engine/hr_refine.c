@@ -172,6 +172,16 @@ static rad_status apply(rad_solver *sv, const void *item, const wave_verdict *v)
  */
 #define HR_BATCH_PAIRS (1u << 15)
 
+/* Count in w the pairs of l from the from-th on as pending (wave.h). */
+static void pend_list(const rad_hier *h, rad_wave *w, const wave_list *l,
+                      size_t from)
+{
+	const hr_pair *p = l->v;
+	for (size_t i = from; i < l->n; i++)
+		wave_pend_split(h, w, p[i].rcv, p[i].src, (int)p[i].rcv_only,
+		                1);
+}
+
 /* Under a budget: what the pairs still to split will take, counted
  * afresh (a pair counts its element splits until they are made). */
 static void repend(rad_solver *sv, hr_state *st)
@@ -180,14 +190,8 @@ static void repend(rad_solver *sv, hr_state *st)
 	if (!sv->mem.budget)
 		return;
 	w->pending = w->pending_kids = 0;
-	const hr_pair *p = w->parents.v;
-	for (size_t i = w->parents_next; i < w->parents.n; i++)
-		wave_pend_split(&sv->h, w, p[i].rcv, p[i].src,
-		                (int)p[i].rcv_only, 1);
-	p = w->held.v;
-	for (size_t i = 0; i < w->held.n; i++)
-		wave_pend_split(&sv->h, w, p[i].rcv, p[i].src,
-		                (int)p[i].rcv_only, 1);
+	pend_list(&sv->h, w, &w->parents, w->parents_next);
+	pend_list(&sv->h, w, &w->held, 0);
 }
 
 /* The pairs held become the parents of the next round. */

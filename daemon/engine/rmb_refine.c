@@ -384,7 +384,7 @@ static void free_children(rad_solver *sv, rmb_state *st, uint32_t id,
 		rmb_count_deleted(sv, child + k, rs);
 	}
 	rad_pool_release_run(&h->links, child, n);
-	rad_link_make_active(h, rad_link_at(h, id));
+	rad_link_make_active(h, id);
 }
 
 /* Items judged at once: enough for the threads, small enough that the
@@ -492,7 +492,7 @@ static int post(rad_solver *sv, rmb_state *st, uint32_t id, rad_status *rs)
 			/* The children were counted (and their subtrees
 			 * freed) by their own post(). */
 			rad_pool_release_run(&h->links, run, n);
-			rad_link_make_active(h, l);
+			rad_link_make_active(h, id);
 		} else if (kept < n) {
 			/* Compact the run to its kept links, their bits
 			 * with them. */

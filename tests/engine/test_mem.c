@@ -313,7 +313,7 @@ static void test_link_records(void **state)
 	assert_true(rad_link_ext_of(&h, l)->spread == 2.0f);
 	assert_true(l->ff == 0.25f);
 	rad_pool_release_run(&h.links, kids, 3);
-	rad_link_make_active(&h, l);
+	rad_link_make_active(&h, id);
 	assert_false(rad_link_passive(l));
 	assert_true(rad_link_spread(&h, l) == 2.0f);
 	assert_int_equal(rad_pool_live(&h.links_ext), 0);
