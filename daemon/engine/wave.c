@@ -132,11 +132,12 @@ static int split_side(const rad_hier *h, uint32_t r, uint32_t s, int rcv_only)
 	return rs ? 1 : 2;
 }
 
-/* Bytes an element split takes: four elements and the solver's scratch
- * for them. */
-static size_t elem_split_bytes(const rad_wave *w)
+/* Bytes an element split takes: four elements, hr's list heads for
+ * them, and the solver's scratch for them. */
+static size_t elem_split_bytes(const rad_hier *h, const rad_wave *w)
 {
-	return 4 * (sizeof(rad_elem) + w->elem_extra);
+	return 4 * (sizeof(rad_elem) + (h->lists ? sizeof(uint32_t) : 0) +
+	            w->elem_extra);
 }
 
 /* 1 if splitting the pair item starts with makes no element and no link
@@ -190,7 +191,7 @@ static void judge_range(void *ud, size_t b, size_t e, int thread)
 static size_t budget_block(const rad_solver *sv, const rad_wave *w)
 {
 	size_t pair = WAVE_KIDS * (2 * (size_t)w->item_size + w->link_cost) +
-	              elem_split_bytes(w);
+	              elem_split_bytes(&sv->h, w);
 	size_t m = (size_t)sv->mem.budget / 64 / pair;
 	return m < 64 ? 64 : m > WAVE_DEFER_BLOCK ? WAVE_DEFER_BLOCK : m;
 }
@@ -319,10 +320,11 @@ static int room_with(const rad_solver *sv, const rad_wave *w, size_t n,
 	 * pairs applied already take w->pending (and pending_kids items). */
 	size_t item = w->item_size;
 	size_t kids = n * WAVE_KIDS + w->pending_kids + more_kids;
-	size_t bytes = list_growth(&w->todo, kids, item) +
-	               list_growth(&w->held, n, item) +
-	               n * (WAVE_KIDS * w->link_cost + elem_split_bytes(w)) +
-	               rest * w->link_cost + w->pending + more;
+	size_t bytes =
+	        list_growth(&w->todo, kids, item) +
+	        list_growth(&w->held, n, item) +
+	        n * (WAVE_KIDS * w->link_cost + elem_split_bytes(&sv->h, w)) +
+	        rest * w->link_cost + w->pending + more;
 	return wave_room_for(sv, w, bytes);
 }
 
@@ -336,8 +338,12 @@ int wave_room_for(const rad_solver *sv, const rad_wave *w, size_t bytes)
 	if (!sv->mem.budget)
 		return 1;
 	const rad_hier *h = &sv->h;
+	/* A block of each pool that grows: elements, links, and hr's list
+	 * heads or rmb's passive links' records. */
+	const rad_pool *third = h->lists ? &h->heads : &h->links_ext;
 	size_t blocks = ((size_t)h->elems.rec_size << h->elems.shift) +
-	                ((size_t)h->links.rec_size << h->links.shift);
+	                ((size_t)h->links.rec_size << h->links.shift) +
+	                ((size_t)third->rec_size << third->shift);
 	return rad_mem_room(&sv->mem, blocks + w->reserve + bytes);
 }
 
@@ -362,7 +368,7 @@ static size_t split_cost(const rad_hier *h, const rad_wave *w, uint32_t r,
 	int nr = side & 1 ? child_count(h, r, &splits) : 1;
 	int ns = side == 3 ? nr : side & 2 ? child_count(h, s, &splits) : 1;
 	*kids = (size_t)(nr * ns);
-	return *kids * w->link_cost + (size_t)splits * elem_split_bytes(w);
+	return *kids * w->link_cost + (size_t)splits * elem_split_bytes(h, w);
 }
 
 void wave_pend_split(const rad_hier *h, rad_wave *w, uint32_t r, uint32_t s,
