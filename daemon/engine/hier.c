@@ -355,11 +355,11 @@ rad_status rad_hier_init(rad_hier *h, const rad_scene *s, rad_mem *mem,
 		rad_elem *e = rad_elem_at(h, i);
 		e->poly = i;
 		e->child = RAD_NONE;
-		if (lists)
-			*(uint32_t *)rad_pool_at(&h->heads, i) = RAD_NONE;
 		e->exposed = RAD_EXPOSED_ALL;
 		h->order[i] = i;
 	}
+	if (lists) /* the roots are one run, in block 0 */
+		no_links(rad_pool_at(&h->heads, 0), n);
 	h->nleaves = n;
 	/* After the roots' edges are known (rad_hier_cover_dist). */
 	if (s->vis)

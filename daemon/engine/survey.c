@@ -222,7 +222,7 @@ static size_t sample_poly(const rad_scene *sc, const rad_poly *p,
 			    (p->quad ? s > 1 + EDGE_TOL || t > 1 + EDGE_TOL
 			             : s + t > 1 + EDGE_TOL))
 				continue;
-			v3 x = rad_poly_point(sc, p, s, t);
+			v3 x = v3_madd(v3_madd(p0, pe1, s), pe2, t);
 			double *out = pts + 6 * k;
 			out[0] = x.x;
 			out[1] = x.y;
