@@ -429,7 +429,8 @@ static rad_status run_waves(rad_solver *sv, rmb_state *st)
 {
 	rad_wave *w = &st->wave;
 	while (w->todo.n > 0) {
-		size_t n = w->todo.n < RMB_CHUNK ? w->todo.n : RMB_CHUNK;
+		size_t n = wave_top_fit(
+		        sv, w, w->todo.n < RMB_CHUNK ? w->todo.n : RMB_CHUNK);
 		rad_status rs = wave_take_top(sv, w, n);
 		if (!rs)
 			rs = wave_run(sv, w, w->held.v, n, judge, apply);

@@ -84,15 +84,35 @@ void wave_release(rad_solver *sv, rad_wave *w)
 	w->verdict_cap = 0;
 }
 
+/* Capacity list l grows to for `need` items: doubled, or under a memory
+ * budget with no room for that, an eighth more (at least `need`). */
+static size_t list_target(const rad_solver *sv, const wave_list *l, size_t need,
+                          size_t item)
+{
+	size_t c = l->cap ? l->cap : 1024;
+	while (c < need)
+		c *= 2;
+	if (sv->mem.budget && !rad_mem_room(&sv->mem, (c - l->cap) * item)) {
+		c = l->cap + l->cap / 8;
+		if (c < need)
+			c = need;
+	}
+	return c;
+}
+
 rad_status wave_push(rad_solver *sv, const rad_wave *w, wave_list *l,
                      const void *item)
 {
-	unsigned char *p = rad_mem_grow(&sv->mem, RAD_MEM_SCRATCH, l->v,
-	                                &l->cap, l->n + 1, w->item_size, 1024);
-	if (!p)
-		return RAD_ERR_NOMEM;
-	l->v = p;
-	memcpy(p + l->n * w->item_size, item, w->item_size);
+	if (l->n == l->cap) {
+		size_t c = list_target(sv, l, l->n + 1, w->item_size);
+		void *p = rad_mem_realloc(&sv->mem, RAD_MEM_SCRATCH, l->v,
+		                          c * w->item_size);
+		if (!p)
+			return RAD_ERR_NOMEM;
+		l->v = p;
+		l->cap = c;
+	}
+	memcpy((unsigned char *)l->v + l->n * w->item_size, item, w->item_size);
 	l->n++;
 	return RAD_OK;
 }
@@ -295,16 +315,14 @@ int wave_children(rad_hier *h, uint32_t r, uint32_t s, int rcv_only,
 	return n;
 }
 
-/* Bytes list l grows by (rad_mem_grow doubles it) to take `extra` more
- * items of `item` bytes; 0 while its capacity holds them. */
-static size_t list_growth(const wave_list *l, size_t extra, size_t item)
+/* Bytes list l grows by (list_target) to take `extra` more items of
+ * `item` bytes; 0 while its capacity holds them. */
+static size_t list_growth(const rad_solver *sv, const wave_list *l,
+                          size_t extra, size_t item)
 {
 	if (l->n + extra <= l->cap)
 		return 0;
-	size_t c = l->cap ? l->cap : 1024;
-	while (c < l->n + extra)
-		c *= 2;
-	return (c - l->cap) * item;
+	return (list_target(sv, l, l->n + extra, item) - l->cap) * item;
 }
 
 /* wave_room with one more split of `more` bytes and `more_kids` children
@@ -321,8 +339,8 @@ static int room_with(const rad_solver *sv, const rad_wave *w, size_t n,
 	size_t item = w->item_size;
 	size_t kids = n * WAVE_KIDS + w->pending_kids + more_kids;
 	size_t bytes =
-	        list_growth(&w->todo, kids, item) +
-	        list_growth(&w->held, n, item) +
+	        list_growth(sv, &w->todo, kids, item) +
+	        list_growth(sv, &w->held, n, item) +
 	        n * (WAVE_KIDS * w->link_cost + elem_split_bytes(&sv->h, w)) +
 	        rest * w->link_cost + w->pending + more;
 	return wave_room_for(sv, w, bytes);
@@ -331,6 +349,20 @@ static int room_with(const rad_solver *sv, const rad_wave *w, size_t n,
 int wave_room(const rad_solver *sv, const rad_wave *w, size_t n, size_t rest)
 {
 	return room_with(sv, w, n, rest, 0, 0);
+}
+
+size_t wave_top_fit(const rad_solver *sv, const rad_wave *w, size_t n)
+{
+	if (!sv->mem.budget)
+		return n;
+	/* Taking n leaves todo.n - n, and their children may bring it to
+	 * todo.n - n + n x WAVE_KIDS. */
+	while (n > 1 &&
+	       !wave_room_for(sv, w,
+	                      list_growth(sv, &w->todo, n * (WAVE_KIDS - 1),
+	                                  w->item_size)))
+		n /= 2;
+	return n;
 }
 
 int wave_room_for(const rad_solver *sv, const rad_wave *w, size_t bytes)

@@ -146,6 +146,11 @@ int wave_children(rad_hier *h, uint32_t r, uint32_t s, int rcv_only,
  * stats.budget_held.
  */
 int wave_room(const rad_solver *sv, const rad_wave *w, size_t n, size_t rest);
+/* Under a memory budget, the largest of n, n/2, n/4 ... 1 items a wave
+ * may take off the top of todo so that the children they may push
+ * still fit (wave_room_for): the work list of a depth-first walk stays
+ * within the budget however deep the walk goes.  n without a budget. */
+size_t wave_top_fit(const rad_solver *sv, const rad_wave *w, size_t n);
 /* 1 if `bytes` more still leave a block for each pool and w->reserve
  * free under the solver's memory budget (always 1 without one). */
 int wave_room_for(const rad_solver *sv, const rad_wave *w, size_t bytes);

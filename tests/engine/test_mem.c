@@ -622,6 +622,28 @@ static double floor_lux(const rad_solver *sv)
 	return lux[0] + lux[1];
 }
 
+/* Options for solver `kind` at eps 1e-5 on `threads` threads, and the
+ * solver's peak without a budget over 3 steps (*lux: floor_lux then). */
+static int64_t budget_options(const rad_scene *s, rad_solver_kind kind,
+                              int threads, rad_options *o, double *lux)
+{
+	rad_error err;
+	rad_options_default(o);
+	o->threads = threads;
+	o->solver = kind;
+	o->eps = 1e-5;
+	rad_solver *sv = NULL;
+	assert_int_equal(rad_solver_new(s, o, &sv, &err), RAD_OK);
+	for (int i = 0; i < 3; i++)
+		assert_int_equal(rad_solver_step(sv, &err), RAD_OK);
+	rad_mem_report m;
+	rad_solver_memory(sv, &m);
+	if (lux)
+		*lux = floor_lux(sv);
+	rad_solver_free(sv);
+	return m.peak_work;
+}
+
 /*
  * A memory budget (rad_options.memory_budget): hr and rmb solve under
  * 60 % of the memory they take without one, hold no more than it, and
@@ -638,19 +660,10 @@ static void test_budget_holds(void **state)
 	rad_solver_kind kinds[2] = {RAD_SOLVER_HR, RAD_SOLVER_RMB};
 	for (int k = 0; k < 2; k++) {
 		rad_options o;
-		rad_options_default(&o);
-		o.threads = 1;
-		o.solver = kinds[k];
-		o.eps = 1e-5;
+		double lux0;
+		int64_t free_peak = budget_options(s, kinds[k], 1, &o, &lux0);
 		rad_solver *sv = NULL;
-		assert_int_equal(rad_solver_new(s, &o, &sv, &err), RAD_OK);
-		for (int i = 0; i < 3; i++)
-			assert_int_equal(rad_solver_step(sv, &err), RAD_OK);
 		rad_mem_report m;
-		rad_solver_memory(sv, &m);
-		int64_t free_peak = m.peak_work;
-		double lux0 = floor_lux(sv);
-		rad_solver_free(sv);
 
 		o.memory_budget = 0.6 * (double)free_peak / 1048576.0;
 		int64_t budget = (int64_t)(o.memory_budget * 1048576.0);
@@ -701,6 +714,60 @@ static void test_budget_holds(void **state)
 	assert_int_equal(atomic_load(&m.budget_refusals), 1);
 	rad_mem_free(&m, RAD_MEM_LINKS, a);
 	rad_mem_free(&m, RAD_MEM_STUDY, c);
+}
+
+/*
+ * Every budget between the hierarchy's size and the unbudgeted peak: a
+ * solver is either refused when it is made (naming the budget) or runs
+ * its steps to the end within the budget -- never failing half way, as
+ * rmb did when the work list of its walk grew past the room left (here
+ * at 10 %, in its first step).
+ */
+static void test_budget_sweep(void **state)
+{
+	(void)state;
+	rad_scene *s = NULL;
+	rad_error err;
+	assert_int_equal(build_grid_room(8, &s, &err), RAD_OK);
+	rad_solver_kind kinds[2] = {RAD_SOLVER_HR, RAD_SOLVER_RMB};
+	for (int k = 0; k < 2; k++) {
+		rad_options o;
+		int64_t free_peak = budget_options(s, kinds[k], 2, &o, NULL);
+		rad_solver *sv = NULL;
+		rad_mem_report m;
+		int refused = 0, solved = 0;
+		for (int pc = 10; pc <= 100; pc += 3) {
+			o.memory_budget =
+			        pc / 100.0 * (double)free_peak / 1048576.0;
+			int64_t budget = (int64_t)(o.memory_budget * 1048576.0);
+			rad_status rs = rad_solver_new(s, &o, &sv, &err);
+			if (rs != RAD_OK) {
+				assert_int_equal(rs, RAD_ERR_NOMEM);
+				if (!strstr(err.msg, "memory budget"))
+					fail_msg("refused with '%s'", err.msg);
+				assert_int_equal(solved, 0);
+				refused++;
+				continue;
+			}
+			for (int i = 0; i < 3; i++) {
+				rs = rad_solver_step(sv, &err);
+				if (rs != RAD_OK)
+					fail_msg("%s at %d %% (%.3f MiB), step "
+					         "%d: %s",
+					         k ? "rmb" : "hr", pc,
+					         o.memory_budget, i + 1,
+					         err.msg);
+			}
+			rad_solver_memory(sv, &m);
+			assert_true(m.peak_work <= budget);
+			rad_solver_free(sv);
+			solved++;
+		}
+		print_message("%s: %d budgets refused, %d solved\n",
+		              k ? "rmb" : "hr", refused, solved);
+		assert_true(solved > 0);
+	}
+	rad_scene_free(s);
 }
 
 /* The compact BVH (rad_bvh_set_mode) holds less and finds the same hits:
@@ -829,6 +896,7 @@ int main(void)
 	        cmocka_unit_test(test_link_records),
 	        cmocka_unit_test(test_limit_refuses_cleanly),
 	        cmocka_unit_test(test_budget_holds),
+	        cmocka_unit_test(test_budget_sweep),
 	        cmocka_unit_test(test_compact_bvh_same_results),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
