@@ -203,6 +203,7 @@ static void next_round(rad_solver *sv, hr_state *st)
 	w->held = t;
 	w->held.n = 0;
 	w->parents_next = 0;
+	wave_list_fit(sv, w, &w->parents);
 	repend(sv, st);
 }
 

@@ -117,6 +117,18 @@ rad_status wave_push(rad_solver *sv, const rad_wave *w, wave_list *l,
 	return RAD_OK;
 }
 
+void wave_list_fit(rad_solver *sv, const rad_wave *w, wave_list *l)
+{
+	if (l->n == 0 || l->cap - l->n < 4096)
+		return;
+	void *p = rad_mem_realloc(&sv->mem, RAD_MEM_SCRATCH, l->v,
+	                          l->n * w->item_size);
+	if (p) {
+		l->v = p;
+		l->cap = l->n;
+	}
+}
+
 rad_status wave_take_top(rad_solver *sv, rad_wave *w, size_t n)
 {
 	unsigned char *p = rad_mem_grow(&sv->mem, RAD_MEM_SCRATCH, w->held.v,

@@ -97,6 +97,10 @@ void wave_release(rad_solver *sv, rad_wave *w);
 /* Append a copy of item to l (w->todo or w->held). */
 rad_status wave_push(rad_solver *sv, const rad_wave *w, wave_list *l,
                      const void *item);
+/* Give back what l holds beyond its items, once that is more than a
+ * few thousand (its doubling left it up to half empty); l stays as it
+ * is if the allocator cannot. */
+void wave_list_fit(rad_solver *sv, const rad_wave *w, wave_list *l);
 /* Move the top n items of todo (the last pushed) to held, in order: a
  * wave of a work list used as a stack. */
 rad_status wave_take_top(rad_solver *sv, rad_wave *w, size_t n);
