@@ -18,6 +18,7 @@
 #include "mem.h"
 #include "rad.h"
 #include "solver.h"
+#include "wave.h"
 
 static int64_t heap_in_use(void)
 {
@@ -770,6 +771,60 @@ static void test_budget_sweep(void **state)
 	rad_scene_free(s);
 }
 
+/*
+ * The refinement's work lists (wave.c): a list gives back its doubling's
+ * slack (wave_list_fit) with its items kept; under a budget with no room
+ * to double, it grows by an eighth; and a wave off the top of a list
+ * used as a stack takes fewer items as the room shrinks (wave_top_fit),
+ * all of them without a budget.
+ */
+static void test_wave_lists(void **state)
+{
+	(void)state;
+	rad_scene *s = NULL;
+	rad_error err;
+	assert_int_equal(build_grid_room(4, &s, &err), RAD_OK);
+	rad_options o;
+	rad_options_default(&o);
+	o.threads = 1;
+	rad_solver *sv = NULL;
+	assert_int_equal(rad_solver_new(s, &o, &sv, &err), RAD_OK);
+	rad_wave w;
+	assert_int_equal(wave_init(sv, &w, 3 * sizeof(uint32_t)), RAD_OK);
+	for (uint32_t i = 0; i < 10000; i++) {
+		uint32_t item[3] = {i, 2 * i, 3 * i};
+		assert_int_equal(wave_push(sv, &w, &w.todo, item), RAD_OK);
+	}
+	assert_int_equal(w.todo.cap, 16384);
+	int64_t before = atomic_load(&sv->mem.bytes[RAD_MEM_SCRATCH]);
+	wave_list_fit(sv, &w, &w.todo);
+	assert_int_equal(w.todo.cap, 10000);
+	assert_true(atomic_load(&sv->mem.bytes[RAD_MEM_SCRATCH]) <=
+	            before - 6000 * 12);
+	const uint32_t *v = w.todo.v;
+	for (uint32_t i = 0; i < 10000; i++)
+		assert_true(v[3 * i] == i && v[3 * i + 2] == 3 * i);
+
+	/* Without a budget a wave takes what it is offered. */
+	assert_int_equal(wave_top_fit(sv, &w, 4096), 4096);
+
+	/* A budget with room for an eighth more, not for twice as many. */
+	int64_t work = atomic_load(&sv->mem.work);
+	rad_mem_set_budget(&sv->mem, work + 10000 * 12 / 4);
+	uint32_t item[3] = {1, 2, 3};
+	assert_int_equal(wave_push(sv, &w, &w.todo, item), RAD_OK);
+	assert_int_equal(w.todo.cap, 11250);
+	assert_int_equal(w.todo.n, 10001);
+	/* A wave whose children could not be listed is cut down. */
+	size_t n = wave_top_fit(sv, &w, 4096);
+	assert_true(n >= 1 && n < 4096);
+	rad_mem_set_budget(&sv->mem, 0);
+
+	wave_destroy(sv, &w);
+	rad_solver_free(sv);
+	rad_scene_free(s);
+}
+
 /* The compact BVH (rad_bvh_set_mode) holds less and finds the same hits:
  * the same lux to the bit. */
 static void test_compact_bvh_same_results(void **state)
@@ -897,6 +952,7 @@ int main(void)
 	        cmocka_unit_test(test_limit_refuses_cleanly),
 	        cmocka_unit_test(test_budget_holds),
 	        cmocka_unit_test(test_budget_sweep),
+	        cmocka_unit_test(test_wave_lists),
 	        cmocka_unit_test(test_compact_bvh_same_results),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
