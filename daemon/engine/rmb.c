@@ -254,8 +254,9 @@ static rad_status rmb_step(rad_solver *sv, rad_error *err)
 	rad_hier *h = &sv->h;
 	wave_step_begin(sv, &st->wave);
 	/* Under a budget, room for the per-element arrays the walk grows
-	 * (err, emax, cut) to double once, and as elements are made, and
-	 * for the link bits (fresh, dead) to double once. */
+	 * (err and emax, made again by every walk, and cut: each as long
+	 * as the elements, twice over), and as elements are made, and for
+	 * the link bits (fresh, dead) to double once. */
 	st->wave.reserve = 6 * (size_t)h->elems.count * sizeof(float) +
 	                   4 * st->cap_bits * sizeof(uint64_t);
 	st->wave.elem_extra = 6 * sizeof(float);

@@ -100,18 +100,28 @@ static size_t list_target(const rad_solver *sv, const wave_list *l, size_t need,
 	return c;
 }
 
+/* Room in l for `need` items, grown as list_target says (and as
+ * list_growth counts). */
+static rad_status list_reserve(rad_solver *sv, const rad_wave *w, wave_list *l,
+                               size_t need)
+{
+	if (need <= l->cap)
+		return RAD_OK;
+	size_t c = list_target(sv, l, need, w->item_size);
+	void *p = rad_mem_realloc(&sv->mem, RAD_MEM_SCRATCH, l->v,
+	                          c * w->item_size);
+	if (!p)
+		return RAD_ERR_NOMEM;
+	l->v = p;
+	l->cap = c;
+	return RAD_OK;
+}
+
 rad_status wave_push(rad_solver *sv, const rad_wave *w, wave_list *l,
                      const void *item)
 {
-	if (l->n == l->cap) {
-		size_t c = list_target(sv, l, l->n + 1, w->item_size);
-		void *p = rad_mem_realloc(&sv->mem, RAD_MEM_SCRATCH, l->v,
-		                          c * w->item_size);
-		if (!p)
-			return RAD_ERR_NOMEM;
-		l->v = p;
-		l->cap = c;
-	}
+	if (list_reserve(sv, w, l, l->n + 1))
+		return RAD_ERR_NOMEM;
 	memcpy((unsigned char *)l->v + l->n * w->item_size, item, w->item_size);
 	l->n++;
 	return RAD_OK;
@@ -131,14 +141,11 @@ void wave_list_fit(rad_solver *sv, const rad_wave *w, wave_list *l)
 
 rad_status wave_take_top(rad_solver *sv, rad_wave *w, size_t n)
 {
-	unsigned char *p = rad_mem_grow(&sv->mem, RAD_MEM_SCRATCH, w->held.v,
-	                                &w->held.cap, n, w->item_size, 1024);
-	if (!p)
+	if (list_reserve(sv, w, &w->held, n))
 		return RAD_ERR_NOMEM;
 	w->todo.n -= n;
-	memcpy(p, (unsigned char *)w->todo.v + w->todo.n * w->item_size,
+	memcpy(w->held.v, (unsigned char *)w->todo.v + w->todo.n * w->item_size,
 	       n * w->item_size);
-	w->held.v = p;
 	w->held.n = n;
 	return RAD_OK;
 }
