@@ -210,14 +210,14 @@ static rad_status build_cluster(rad_hier *h, uint32_t c, const double *ctr,
 	if (kids == RAD_NONE)
 		return rad_fail(err, RAD_ERR_NOMEM,
 		                "cluster tree: out of memory");
-	if ((kids - 1) / 2 >= h->nmom) /* inner_clusters miscounted */
+	if ((kids - 1) / 2 >= h->ninner) /* inner_clusters miscounted */
 		return rad_fail(err, RAD_ERR_STATE,
 		                "cluster tree: more inner clusters than the "
 		                "%u counted",
-		                h->nmom);
+		                h->ninner);
 	cl = rad_cluster_at(h, c); /* records never move; reload for clarity */
 	cl->child = kids;
-	rad_cluster_mom *mo = &h->mom[rad_cluster_mom_index(cl)];
+	rad_cluster_inner *mo = &h->inner[rad_cluster_inner_index(cl)];
 	for (int k = 0; k < 6; k++)
 		mo->m[k] = (float)m[k];
 	double rg = sphere_mean_sqrt(m);
@@ -248,12 +248,12 @@ static uint32_t inner_clusters(uint32_t n)
 static rad_status build_clusters(rad_hier *h, rad_error *err)
 {
 	const rad_scene *s = h->scene;
-	h->nmom = inner_clusters(s->npolys) + 1;
-	h->mom = rad_mem_alloc(h->mem, RAD_MEM_ELEM_CLUSTER,
-	                       h->nmom * sizeof(rad_cluster_mom));
+	h->ninner = inner_clusters(s->npolys) + 1;
+	h->inner = rad_mem_alloc(h->mem, RAD_MEM_ELEM_CLUSTER,
+	                         h->ninner * sizeof(rad_cluster_inner));
 	double *ctr = rad_mem_alloc(h->mem, RAD_MEM_SCRATCH,
 	                            3 * (size_t)s->npolys * sizeof(double));
-	if (!h->mom || !ctr) {
+	if (!h->inner || !ctr) {
 		rad_mem_free(h->mem, RAD_MEM_SCRATCH, ctr);
 		return rad_fail(err, RAD_ERR_NOMEM,
 		                "cluster tree: out of memory");
@@ -398,9 +398,9 @@ void rad_hier_destroy(rad_hier *h)
 	h->cluster_heads = NULL;
 	rad_mem_free(h->mem, RAD_MEM_ELEM_CLUSTER, h->order);
 	h->order = NULL;
-	rad_mem_free(h->mem, RAD_MEM_ELEM_CLUSTER, h->mom);
-	h->mom = NULL;
-	h->nmom = 0;
+	rad_mem_free(h->mem, RAD_MEM_ELEM_CLUSTER, h->inner);
+	h->inner = NULL;
+	h->ninner = 0;
 }
 
 static double poly_edge(const rad_scene *s, const rad_poly *p)
@@ -575,7 +575,6 @@ static void reset_clusters(rad_hier *h, uint32_t id)
 	memset(cl->I, 0, sizeof(cl->I));
 	memset(cl->V, 0, sizeof(cl->V));
 	cl->S = 0;
-	memset(cl->dB, 0, sizeof(cl->dB));
 	if (cl->child != RAD_NONE) {
 		reset_clusters(h, cl->child);
 		reset_clusters(h, cl->child + 1);
@@ -625,39 +624,77 @@ static void pull_elem(rad_hier *h, uint32_t id)
 	set_avg(e->B, e->dB, acc, area);
 }
 
+/* B, dB (area averages) and nB, ndB of leaf cluster cl, summed from its
+ * polygons' root elements. */
+static void leaf_sums(const rad_hier *h, const rad_cluster *cl, double acc[6],
+                      double nb[6])
+{
+	for (uint32_t j = cl->first; j < cl->first + cl->count; j++) {
+		const rad_elem *e = rad_elem_at(h, h->order[j]);
+		const float *n = h->scene->polys[h->order[j]].n;
+		float a = rad_elem_area(h, e);
+		double b = (double)a * rad_luma(e->B);
+		double d = (double)a * rad_luma(e->dB);
+		acc_node(acc, a, e->B, e->dB);
+		for (int c = 0; c < 3; c++) {
+			nb[c] += b * n[c];
+			nb[3 + c] += d * n[c];
+		}
+	}
+}
+
+void rad_cluster_delta(const rad_hier *h, const rad_cluster *cl, float dB[3],
+                       float ndB[3])
+{
+	float B[3], tmp[3];
+	if (cl->child != RAD_NONE) {
+		const rad_cluster_inner *in =
+		        &h->inner[rad_cluster_inner_index(cl)];
+		if (dB)
+			memcpy(dB, in->dB, sizeof(in->dB));
+		if (ndB)
+			memcpy(ndB, in->ndB, sizeof(in->ndB));
+		return;
+	}
+	double acc[6] = {0}, nb[6] = {0};
+	leaf_sums(h, cl, acc, nb);
+	set_avg(B, dB ? dB : tmp, acc, cl->area);
+	for (int c = 0; ndB && c < 3; c++)
+		ndB[c] = (float)nb[3 + c];
+}
+
+/* Post-order: B and nB of every cluster, dB and ndB of the inner ones
+ * (a leaf's are summed when asked, rad_cluster_delta), after the
+ * polygons' trees are pulled. */
 static void pull_cluster(rad_hier *h, uint32_t id)
 {
 	rad_cluster *cl = rad_cluster_at(h, id);
 	double acc[6] = {0}, nb[6] = {0};
-	if (cl->child != RAD_NONE) {
-		for (uint32_t k = 0; k < 2; k++) {
-			pull_cluster(h, cl->child + k);
-			const rad_cluster *ch =
-			        rad_cluster_at(h, cl->child + k);
-			acc_node(acc, ch->area, ch->B, ch->dB);
-			for (int c = 0; c < 3; c++) {
-				nb[c] += ch->nB[c];
-				nb[3 + c] += ch->ndB[c];
-			}
-		}
-	} else {
-		for (uint32_t j = cl->first; j < cl->first + cl->count; j++) {
-			const rad_elem *e = rad_elem_at(h, h->order[j]);
-			const float *n = h->scene->polys[h->order[j]].n;
-			float a = rad_elem_area(h, e);
-			double b = (double)a * rad_luma(e->B);
-			double d = (double)a * rad_luma(e->dB);
-			acc_node(acc, a, e->B, e->dB);
-			for (int c = 0; c < 3; c++) {
-				nb[c] += b * n[c];
-				nb[3 + c] += d * n[c];
-			}
+	float dB[3];
+	if (cl->child == RAD_NONE) {
+		leaf_sums(h, cl, acc, nb);
+		set_avg(cl->B, dB, acc, cl->area);
+		for (int c = 0; c < 3; c++)
+			cl->nB[c] = (float)nb[c];
+		return;
+	}
+	for (uint32_t k = 0; k < 2; k++) {
+		pull_cluster(h, cl->child + k);
+		const rad_cluster *ch = rad_cluster_at(h, cl->child + k);
+		float cdB[3], cndB[3];
+		rad_cluster_delta(h, ch, cdB, cndB);
+		acc_node(acc, ch->area, ch->B, cdB);
+		for (int c = 0; c < 3; c++) {
+			nb[c] += ch->nB[c];
+			nb[3 + c] += cndB[c];
 		}
 	}
-	set_avg(cl->B, cl->dB, acc, cl->area);
+	cl = rad_cluster_at(h, id);
+	rad_cluster_inner *in = &h->inner[rad_cluster_inner_index(cl)];
+	set_avg(cl->B, in->dB, acc, cl->area);
 	for (int c = 0; c < 3; c++) {
 		cl->nB[c] = (float)nb[c];
-		cl->ndB[c] = (float)nb[3 + c];
+		in->ndB[c] = (float)nb[3 + c];
 	}
 }
 
@@ -849,12 +886,12 @@ void rad_link_make_active(rad_hier *h, uint32_t id)
 static double proj_model(const rad_hier *h, const rad_cluster *c, double dx,
                          double dy, double dz)
 {
-	const rad_cluster_mom *mo = &h->mom[rad_cluster_mom_index(c)];
+	const rad_cluster_inner *mo = &h->inner[rad_cluster_inner_index(c)];
 	const float *m = mo->m;
 	double q = m[0] * dx * dx + m[1] * dy * dy + m[2] * dz * dz +
 	           2 * (m[3] * dx * dy + m[4] * dx * dz + m[5] * dy * dz);
 	double odd = c->n[0] * dx + c->n[1] * dy + c->n[2] * dz;
-	return fmax(0, 0.5 * (odd + mo->q * sqrt(fmax(q, 0))));
+	return rad_pos(0.5 * (odd + mo->q * sqrt(rad_pos(q))));
 }
 
 static double proj_at(const rad_hier *h, const rad_cluster *c, double dx,
@@ -864,8 +901,8 @@ static double proj_at(const rad_hier *h, const rad_cluster *c, double dx,
 		double p = 0;
 		for (uint32_t j = c->first; j < c->first + c->count; j++) {
 			const rad_poly *q = &h->scene->polys[h->order[j]];
-			p += q->area * fmax(0, q->n[0] * dx + q->n[1] * dy +
-			                               q->n[2] * dz);
+			p += q->area * rad_pos(q->n[0] * dx + q->n[1] * dy +
+			                       q->n[2] * dz);
 		}
 		return p;
 	}
@@ -882,11 +919,12 @@ double rad_cluster_proj(const rad_hier *h, const rad_cluster *c, double dx,
 	return proj_at(h, c, dx, dy, dz, RAD_PROJ_DEPTH);
 }
 
-double rad_cluster_emit(const rad_cluster *c, int delta, double p, double dx,
-                        double dy, double dz)
+double rad_cluster_emit(const rad_cluster *c, const float B[3],
+                        const float nB[3], double p, double dx, double dy,
+                        double dz)
 {
-	const float *v = delta ? c->ndB : c->nB;
-	double mean = rad_luma(delta ? c->dB : c->B);
+	const float *v = nB;
+	double mean = rad_luma(B);
 	if (!(p > 1e-6 * c->area) || mean == 0)
 		return 1;
 	double odd = (v[0] * dx + v[1] * dy + v[2] * dz) / mean -

@@ -182,25 +182,31 @@ typedef struct rad_cluster {
 	float n[3];            /* sum of area x unit normal, |n| <= area */
 	uint32_t child;        /* first of 2 child clusters, RAD_NONE = leaf */
 	uint32_t first, count; /* range of order[] covered */
-	float B[3], I[3], dB[3];
-	float V[3], S;       /* where I came from (DESIGN, push); with I */
-	float nB[3], ndB[3]; /* sum of area x luma(B or dB) x normal (pull) */
+	float B[3], I[3];
+	float V[3], S; /* where I came from (DESIGN, push); with I */
+	float nB[3];   /* sum of area x luma(B) x normal (pull) */
 } rad_cluster;
 
-/* The moment model of an inner cluster (DESIGN).  A leaf's projected
- * area is summed over its polygons and needs none, so the models are an
- * array of their own, one per pair of child clusters: half the tree's
- * clusters are leaves, and the model was 28 of the 160 bytes every
- * cluster had. */
-typedef struct rad_cluster_mom {
-	float m[6]; /* sum of area x n n^T: xx yy zz xy xz yz */
-	float q;    /* scale of the even part */
-} rad_cluster_mom;
+/* What an inner cluster has beside its rad_cluster.  A leaf holds at
+ * most RAD_CLUSTER_LEAF_MAX polygons: its projected area is summed over
+ * them and needs no model, and its dB and ndB, which only rmb's walk and
+ * hr's statistics read, are summed from their root elements when asked
+ * (rad_cluster_delta), as the pull would sum them.  So these are an array
+ * of their own, one per pair of child clusters: half the tree's clusters
+ * are leaves, and every cluster was 160 bytes with the model and 128
+ * with dB and ndB.  B and nB, which every gather reads, stay in every
+ * cluster: summing a leaf's in the gather too made hr 3-8 % slower. */
+typedef struct rad_cluster_inner {
+	float m[6];   /* moment model: sum of area x n n^T, xx yy zz xy xz yz */
+	float q;      /* scale of the even part */
+	float dB[3];  /* pulled from the two children */
+	float ndB[3]; /* sum of area x luma(dB) x normal */
+} rad_cluster_inner;
 
-/* Index of inner cluster c's model in rad_hier.mom: its children's pair
- * (ids child, child+1; every pair starts at least 2 after the one
+/* Index of inner cluster c's record in rad_hier.inner: its children's
+ * pair (ids child, child+1; every pair starts at least 2 after the one
  * before, so no two inner clusters share one). */
-static inline uint32_t rad_cluster_mom_index(const rad_cluster *c)
+static inline uint32_t rad_cluster_inner_index(const rad_cluster *c)
 {
 	return (c->child - 1) / 2;
 }
@@ -239,8 +245,8 @@ _Static_assert(sizeof(rad_elem) == 52, "rad_elem grew");
 _Static_assert(sizeof(rad_link) == 16, "rad_link grew");
 _Static_assert(sizeof(rad_link_ext) == 12, "rad_link_ext grew");
 _Static_assert(sizeof(rad_hlink) == 16, "rad_hlink grew");
-_Static_assert(sizeof(rad_cluster) == 128, "rad_cluster grew");
-_Static_assert(sizeof(rad_cluster_mom) == 28, "rad_cluster_mom grew");
+_Static_assert(sizeof(rad_cluster) == 104, "rad_cluster grew");
+_Static_assert(sizeof(rad_cluster_inner) == 52, "rad_cluster_inner grew");
 
 typedef struct rad_hier {
 	const rad_scene *scene;
@@ -256,14 +262,14 @@ typedef struct rad_hier {
 	int lists;
 	rad_pool heads;
 	uint32_t *cluster_heads;
-	uint32_t *order;      /* polygon ids in cluster order, ELEM_CLUSTER */
-	rad_cluster_mom *mom; /* inner clusters' models, ELEM_CLUSTER */
-	uint32_t nmom;        /* entries (rad_cluster_mom_index below it) */
-	uint32_t nleaves;     /* surface leaves */
-	double min_edge;      /* elements with a longer edge may split */
-	uint64_t splits;      /* element splits since last reset */
-	uint64_t gen;         /* unique per rad_hier_init (0: none), the key of
-	                         rad_elem_patch_id's memo */
+	uint32_t *order; /* polygon ids in cluster order, ELEM_CLUSTER */
+	rad_cluster_inner *inner; /* inner clusters' records, ELEM_CLUSTER */
+	uint32_t ninner;  /* entries (rad_cluster_inner_index below it) */
+	uint32_t nleaves; /* surface leaves */
+	double min_edge;  /* elements with a longer edge may split */
+	uint64_t splits;  /* element splits since last reset */
+	uint64_t gen;     /* unique per rad_hier_init (0: none), the key of
+	                     rad_elem_patch_id's memo */
 } rad_hier;
 
 static inline rad_elem *rad_elem_at(const rad_hier *h, uint32_t id)
@@ -366,9 +372,16 @@ void rad_elem_patch_id(const rad_hier *h, uint32_t id, rad_patch *p);
 void rad_region_quarter(float p0[3], float e1[3], float e2[3], int quad, int k);
 
 /* Area of element e, m2: its polygon's times 4^-level (exact). */
+/* The polygon's area times 4^-level, exact: the factor is built from its
+ * exponent bits (level <= RAD_ELEM_MAX_LEVEL, so it is a normal float),
+ * and a product with a power of two rounds as ldexpf does, without its
+ * call (the gather asks for it per link). */
 static inline float rad_elem_area(const rad_hier *h, const rad_elem *e)
 {
-	return ldexpf(h->scene->polys[e->poly].area, -2 * (int)e->level);
+	uint32_t bits = (uint32_t)(127 - 2 * (int)e->level) << 23;
+	float quarter;
+	memcpy(&quarter, &bits, sizeof quarter);
+	return h->scene->polys[e->poly].area * quarter;
 }
 /* 1 if e's polygon is a parallelogram, 0 for a triangle. */
 static inline int rad_elem_quad(const rad_hier *h, const rad_elem *e)
@@ -488,11 +501,21 @@ double rad_cluster_proj(const rad_hier *h, const rad_cluster *c, double dx,
 
 /*
  * What cluster c sends towards unit d, relative to its mean radiosity
- * times p = P(d), its rad_cluster_proj (DESIGN, emission): B when delta
- * is 0, dB when 1.
+ * times p = P(d), its rad_cluster_proj (DESIGN, emission): of B with
+ * mean c->B and nmean c->nB, of dB with its rad_cluster_delta.
  */
-double rad_cluster_emit(const rad_cluster *c, int delta, double p, double dx,
-                        double dy, double dz);
+double rad_cluster_emit(const rad_cluster *c, const float mean[3],
+                        const float nmean[3], double p, double dx, double dy,
+                        double dz);
+
+/*
+ * The dB and ndB of cluster c (either may be NULL): an inner cluster's
+ * pulled record, or a leaf's summed from its polygons' root elements as
+ * the pull sums them (the same bits while those elements hold what was
+ * pulled).
+ */
+void rad_cluster_delta(const rad_hier *h, const rad_cluster *c, float dB[3],
+                       float ndB[3]);
 
 /*
  * Record on cluster c that it took irradiance of photopic value e (normal

@@ -92,9 +92,8 @@ static void gather_list(gather_job *g, uint32_t rcv, uint32_t head, float I[3],
 		const rad_hlink *l = rad_hlink_at(h, id);
 		int light = node_is_light(l->src);
 		double b[3];
-		double f = l->ff * node_emit_factor(h, rcv, l->src, 0);
+		double f = l->ff * node_sends(h, rcv, l->src, 0, b);
 		double *acc = light ? lit : surf;
-		node_B(h, l->src, b);
 		for (int c = 0; c < 3; c++)
 			acc[c] += f * b[c];
 		/* Photopic k weighs a surface's share of the direction. */
@@ -298,15 +297,24 @@ static rad_status study_node(rad_solver *sv, void *ud, uint32_t t)
 	for (uint32_t id = *rad_node_links(&sv->h, t); id != RAD_NONE;
 	     id = rad_hlink_at(h, id)->next) {
 		const rad_hlink *l = rad_hlink_at(h, id);
-		double b = node_luma_B(h, l->src), inc = b;
-		if (!first && node_is_light(l->src))
-			inc = 0;
-		else if (!first)
-			inc = fabs(
-			        node_is_cluster(l->src)
-			                ? rad_luma(
-			                          rad_cluster_at(h, l->src)->dB)
-			                : rad_luma(rad_elem_at(h, l->src)->dB));
+		double b, inc;
+		if (node_is_cluster(l->src)) {
+			const rad_cluster *c = rad_cluster_at(h, l->src);
+			float d[3];
+			b = inc = rad_luma(c->B);
+			if (!first) {
+				rad_cluster_delta(h, c, d, NULL);
+				inc = fabs(rad_luma(d));
+			}
+		} else {
+			b = inc = node_luma_B(h, l->src);
+			if (!first)
+				inc = node_is_light(l->src)
+				              ? 0
+				              : fabs(rad_luma(
+				                        rad_elem_at(h, l->src)
+				                                ->dB));
+		}
 		node_stat_exchange(sv, t, l->src, l->ff, b, inc);
 	}
 	return RAD_OK;

@@ -370,15 +370,47 @@ void node_took(rad_hier *h, uint32_t rcv, uint32_t src, double e)
 	rad_cluster_took(rad_cluster_at(h, rcv), e / take, u.x, u.y, u.z);
 }
 
+/* The emission factor of cluster src towards rcv, of B (mean B) and nB
+ * (or dB and ndB). */
+static double cluster_emit_factor(const rad_hier *h, uint32_t rcv, uint32_t src,
+                                  const float B[3], const float nB[3])
+{
+	v3 u;
+	if (!link_dir(h, src, rcv, &u))
+		return 1;
+	const rad_cluster *c = rad_cluster_at(h, src);
+	return rad_cluster_emit(c, B, nB, rad_cluster_proj(h, c, u.x, u.y, u.z),
+	                        u.x, u.y, u.z);
+}
+
 double node_emit_factor(const rad_hier *h, uint32_t rcv, uint32_t src,
                         int delta)
 {
-	v3 u;
-	if (!node_is_cluster(src) || !link_dir(h, src, rcv, &u))
+	double d[3];
+	if (!node_is_cluster(src))
 		return 1;
+	return delta ? node_sends(h, rcv, src, 1, d)
+	             : cluster_emit_factor(h, rcv, src,
+	                                   rad_cluster_at(h, src)->B,
+	                                   rad_cluster_at(h, src)->nB);
+}
+
+double node_sends(const rad_hier *h, uint32_t rcv, uint32_t src, int delta,
+                  double out[3])
+{
+	if (!node_is_cluster(src)) {
+		if (!delta)
+			node_B(h, src, out);
+		return 1;
+	}
 	const rad_cluster *c = rad_cluster_at(h, src);
-	return rad_cluster_emit(c, delta, rad_cluster_proj(h, c, u.x, u.y, u.z),
-	                        u.x, u.y, u.z);
+	float dB[3], ndB[3];
+	if (delta)
+		rad_cluster_delta(h, c, dB, ndB);
+	for (int k = 0; k < 3; k++)
+		out[k] = delta ? dB[k] : c->B[k];
+	return delta ? cluster_emit_factor(h, rcv, src, dB, ndB)
+	             : cluster_emit_factor(h, rcv, src, c->B, c->nB);
 }
 
 double node_energy_scale(const rad_hier *h, int delta, const double got[3],
@@ -676,7 +708,8 @@ static double box_gap2(const double al[3], const double ah[3],
 {
 	double d2 = 0;
 	for (int k = 0; k < 3; k++) {
-		double gap = fmax(0, fmax(bl[k] - ah[k], al[k] - bh[k]));
+		double a = bl[k] - ah[k], b = al[k] - bh[k];
+		double gap = rad_pos(a > b ? a : b);
 		d2 += gap * gap;
 	}
 	return d2;

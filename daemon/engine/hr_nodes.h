@@ -99,6 +99,14 @@ void node_count_link(rad_stats *s, uint32_t rcv, uint32_t src);
 double node_emit_factor(const rad_hier *h, uint32_t rcv, uint32_t src,
                         int delta);
 /*
+ * What src sends to rcv in a gather: out = its B (delta 0, node_B) or dB
+ * (1, a cluster's; a surface's or light's the caller's own), and the
+ * factor node_emit_factor returns, from one summing of a leaf cluster's
+ * dB and ndB (rad_cluster_delta).
+ */
+double node_sends(const rad_hier *h, uint32_t rcv, uint32_t src, int delta,
+                  double out[3]);
+/*
  * After a gather of photopic value e (power per unit area) by a cluster
  * receiver from src: record its direction for the push (hier.h).  Does
  * nothing for a surface receiver.  Not thread-safe per receiver.

@@ -111,8 +111,10 @@ static void node_dB(const rad_solver *sv, uint32_t t, double out[3])
 			                 : 0;
 		return;
 	}
-	d = node_is_cluster(t) ? rad_cluster_at(&sv->h, t)->dB
-	                       : rad_elem_at(&sv->h, t)->dB;
+	float m[3];
+	if (node_is_cluster(t))
+		rad_cluster_delta(&sv->h, rad_cluster_at(&sv->h, t), m, NULL);
+	d = node_is_cluster(t) ? m : rad_elem_at(&sv->h, t)->dB;
 	for (int c = 0; c < 3; c++)
 		out[c] = d[c];
 	/* The first iteration sends the emission (dB = B = E). */
@@ -251,10 +253,11 @@ static rad_status gather(rad_solver *sv, uint32_t r, uint32_t s, double ff,
 {
 	rmb_state *st = sv->impl;
 	double d[3];
-	node_dB(sv, s, d);
+	double fe = ff * node_sends(&sv->h, r, s, 1, d);
+	if (!node_is_cluster(s))
+		node_dB(sv, s, d);
 	float *I = node_is_cluster(r) ? rad_cluster_at(&sv->h, r)->I
 	                              : rad_elem_at(&sv->h, r)->I;
-	double fe = ff * node_emit_factor(&sv->h, r, s, 1);
 	for (int c = 0; c < 3; c++)
 		I[c] += (float)(fe * d[c]);
 	node_took(&sv->h, r, s, fe * rad_luma3(d));

@@ -15,15 +15,15 @@
  *
  * Bytes: a fixed header (magic, format version, record sizes, counts, the
  * iteration, a digest of the scene's polygons) then the element records,
- * the cluster records, the inner clusters' moment models (one per child
- * pair: the pairs are clusters 1-2, 3-4, ...) and the cluster order, in
- * the machine's byte order
- * (checkpoints are read back by the daemon that wrote them).  As for
- * scenes and solvers, the struct itself is plain calloc, not counted.  Loading
- * trusts nothing: sizes must match exactly, every id must be in range,
- * every record must be reached exactly once from the roots (no cycles,
- * no sharing), and every value must be finite, so a damaged or foreign
- * file is refused with a message instead of crashing a later query.
+ * the cluster records, the inner clusters' records (moment model, dB,
+ * ndB; one per child pair: the pairs are clusters 1-2, 3-4, ...) and the
+ * cluster order, in the machine's byte order (checkpoints are read back
+ * by the daemon that wrote them).  As for scenes and solvers, the struct
+ * itself is plain calloc, not counted.  Loading trusts nothing: sizes
+ * must match exactly, every id must be in range, every record must be
+ * reached exactly once from the roots (no cycles, no sharing), and every
+ * value must be finite, so a damaged or foreign file is refused with a
+ * message instead of crashing a later query.
  */
 #include <math.h>
 #include <stdlib.h>
@@ -34,12 +34,13 @@
 
 #define SOL_MAGIC 0x534c5852u /* "RXLS" little-endian: "luxrad solution" */
 #define SOL_VERSION                                                            \
-	9u /* 2: clusters carry their orientation moments; 3:                  \
-	    * and where their irradiance came from; 4: elements their          \
-	    * exposed fraction (hier.h, Covered parts); 5: their path, not     \
-	    * their region (hier.h, Regions); 6: clusters no parent; 7: nor    \
-	    * elements; 8: the moments of inner clusters only, after the       \
-	    * cluster records; 9: no list heads in elements and clusters */
+	10u /* 2: clusters carry their orientation moments; 3:                 \
+	     * and where their irradiance came from; 4: elements their         \
+	     * exposed fraction (hier.h, Covered parts); 5: their path, not    \
+	     * their region (hier.h, Regions); 6: clusters no parent; 7: nor   \
+	     * elements; 8: the moments of inner clusters only, after the      \
+	     * cluster records; 9: no list heads in elements and clusters;     \
+	     * 10: dB and ndB with the moments, inner clusters only */
 
 struct rad_solution {
 	const rad_scene *scene;
@@ -122,7 +123,7 @@ void rad_solution_free(rad_solution *s)
 	rad_pool_destroy(&s->h.elems);
 	rad_pool_destroy(&s->h.clusters);
 	rad_mem_free(&s->mem, RAD_MEM_SOLUTION, s->h.order);
-	rad_mem_free(&s->mem, RAD_MEM_SOLUTION, s->h.mom);
+	rad_mem_free(&s->mem, RAD_MEM_SOLUTION, s->h.inner);
 	free(s);
 }
 
@@ -185,28 +186,29 @@ static void copy_clusters(const rad_hier *src, rad_hier *dst)
 		if (c->child == RAD_NONE)
 			continue;
 		uint32_t first = next;
-		const rad_cluster_mom *mo = &src->mom[rad_cluster_mom_index(c)];
+		const rad_cluster_inner *mo =
+		        &src->inner[rad_cluster_inner_index(c)];
 		for (uint32_t k = 0; k < 2; k++)
 			out[first + k] = *rad_cluster_at(src, c->child + k);
 		c->child = first;
-		dst->mom[rad_cluster_mom_index(c)] = *mo;
+		dst->inner[rad_cluster_inner_index(c)] = *mo;
 		next += 2;
 	}
 }
 
 /* The models of a solution's nc clusters: one per child pair. */
-static uint32_t sol_nmom(uint32_t nc)
+static uint32_t sol_ninner(uint32_t nc)
 {
 	return nc ? (nc - 1) / 2 : 0;
 }
 
-static int alloc_mom(rad_solution *s, uint32_t nc)
+static int alloc_inner(rad_solution *s, uint32_t nc)
 {
-	s->h.nmom = sol_nmom(nc);
-	s->h.mom = rad_mem_calloc(&s->mem, RAD_MEM_SOLUTION,
-	                          s->h.nmom ? s->h.nmom : 1,
-	                          sizeof(rad_cluster_mom));
-	return s->h.mom ? 0 : -1;
+	s->h.ninner = sol_ninner(nc);
+	s->h.inner = rad_mem_calloc(&s->mem, RAD_MEM_SOLUTION,
+	                            s->h.ninner ? s->h.ninner : 1,
+	                            sizeof(rad_cluster_inner));
+	return s->h.inner ? 0 : -1;
 }
 
 rad_status rad_solution_new(const rad_solver *sv, rad_solution **out,
@@ -233,7 +235,7 @@ rad_status rad_solution_new(const rad_solver *sv, rad_solution **out,
 		                   ne) ||
 		    pool_one_block(&s->h.clusters, &s->mem, sizeof(rad_cluster),
 		                   nc) ||
-		    alloc_mom(s, nc) ||
+		    alloc_inner(s, nc) ||
 		    !(s->h.order = rad_mem_alloc(&s->mem, RAD_MEM_SOLUTION,
 		                                 np * sizeof(uint32_t)))) {
 			rad_solution_free(s);
@@ -319,7 +321,8 @@ rad_status rad_solution_save(const rad_solution *s, unsigned char **out,
 	                 scene_digest(s->scene)};
 	size_t be = (size_t)hd.nelems * sizeof(rad_elem);
 	size_t bc = (size_t)hd.nclusters * sizeof(rad_cluster);
-	size_t bm = (size_t)sol_nmom(hd.nclusters) * sizeof(rad_cluster_mom);
+	size_t bm =
+	        (size_t)sol_ninner(hd.nclusters) * sizeof(rad_cluster_inner);
 	size_t bo = (size_t)hd.norder * sizeof(uint32_t);
 	size_t n = sizeof hd + be + bc + bm + bo;
 	unsigned char *b = malloc(n);
@@ -330,7 +333,7 @@ rad_status rad_solution_save(const rad_solution *s, unsigned char **out,
 	if (np) {
 		memcpy(b + sizeof hd, s->h.elems.block[0], be);
 		memcpy(b + sizeof hd + be, s->h.clusters.block[0], bc);
-		memcpy(b + sizeof hd + be + bc, s->h.mom, bm);
+		memcpy(b + sizeof hd + be + bc, s->h.inner, bm);
 		memcpy(b + sizeof hd + be + bc + bm, s->h.order, bo);
 	}
 	*out = b;
@@ -446,7 +449,7 @@ static rad_status check_clusters(rad_solution *s, uint32_t np, uint32_t nc,
 		if ((i > 0 && !seen[i]) || c->first > np ||
 		    c->count > np - c->first || !finite3(c->lo) ||
 		    !finite3(c->hi) || !finite3(c->B) || !finite3(c->I) ||
-		    !isfinite(c->area))
+		    !finite3(c->nB) || !isfinite(c->area))
 			return rad_fail(err, RAD_ERR_INVALID,
 			                "solution: cluster %u is damaged", i);
 		if (c->child == RAD_NONE)
@@ -455,8 +458,10 @@ static rad_status check_clusters(rad_solution *s, uint32_t np, uint32_t nc,
 			return rad_fail(err, RAD_ERR_INVALID,
 			                "solution: cluster %u has a bad child",
 			                i);
-		const rad_cluster_mom *mo = &s->h.mom[rad_cluster_mom_index(c)];
-		if (!finite3(mo->m) || !finite3(mo->m + 3) || !isfinite(mo->q))
+		const rad_cluster_inner *mo =
+		        &s->h.inner[rad_cluster_inner_index(c)];
+		if (!finite3(mo->m) || !finite3(mo->m + 3) ||
+		    !isfinite(mo->q) || !finite3(mo->dB) || !finite3(mo->ndB))
 			return rad_fail(err, RAD_ERR_INVALID,
 			                "solution: cluster %u's model is "
 			                "damaged",
@@ -508,7 +513,7 @@ static rad_status check_header(const sol_header *hd, const rad_scene *scene,
 	size_t want =
 	        sizeof *hd + (size_t)hd->nelems * sizeof(rad_elem) +
 	        (size_t)hd->nclusters * sizeof(rad_cluster) +
-	        (size_t)sol_nmom(hd->nclusters) * sizeof(rad_cluster_mom) +
+	        (size_t)sol_ninner(hd->nclusters) * sizeof(rad_cluster_inner) +
 	        (size_t)hd->norder * sizeof(uint32_t);
 	if (len != want)
 		return rad_fail(err, RAD_ERR_INVALID,
@@ -546,14 +551,14 @@ rad_status rad_solution_load(const rad_scene *scene, const void *bytes,
 		        (const unsigned char *)bytes + sizeof hd;
 		size_t be = (size_t)hd.nelems * sizeof(rad_elem);
 		size_t bc = (size_t)hd.nclusters * sizeof(rad_cluster);
-		size_t bm = (size_t)sol_nmom(hd.nclusters) *
-		            sizeof(rad_cluster_mom);
+		size_t bm = (size_t)sol_ninner(hd.nclusters) *
+		            sizeof(rad_cluster_inner);
 		unsigned char *seen = NULL;
 		if (pool_one_block(&s->h.elems, &s->mem, sizeof(rad_elem),
 		                   hd.nelems) ||
 		    pool_one_block(&s->h.clusters, &s->mem, sizeof(rad_cluster),
 		                   hd.nclusters) ||
-		    alloc_mom(s, hd.nclusters) ||
+		    alloc_inner(s, hd.nclusters) ||
 		    !(s->h.order =
 		              rad_mem_alloc(&s->mem, RAD_MEM_SOLUTION,
 		                            hd.npolys * sizeof(uint32_t))) ||
@@ -566,7 +571,7 @@ rad_status rad_solution_load(const rad_scene *scene, const void *bytes,
 		}
 		memcpy(s->h.elems.block[0], b, be);
 		memcpy(s->h.clusters.block[0], b + be, bc);
-		memcpy(s->h.mom, b + be + bc, bm);
+		memcpy(s->h.inner, b + be + bc, bm);
 		memcpy(s->h.order, b + be + bc + bm,
 		       hd.npolys * sizeof(uint32_t));
 		st = check_elems(s, hd.npolys, hd.nelems, seen, err);

@@ -46,6 +46,13 @@ static inline v3 v3_madd(v3 a, v3 b, double s) /* a + b*s */
 {
 	return v3_make(a.x + b.x * s, a.y + b.y * s, a.z + b.z * s);
 }
+/* fmax(0, x) as an inline compare (GCC calls libm's fmax, which must
+ * honour NaN: so does this, NaN and -0 both giving +0), for the
+ * projected areas and box gaps asked for per link. */
+static inline double rad_pos(double x)
+{
+	return x > 0 ? x : 0;
+}
 static inline double v3_dot(v3 a, v3 b)
 {
 	return a.x * b.x + a.y * b.y + a.z * b.z;
