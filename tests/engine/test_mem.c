@@ -536,6 +536,18 @@ static rad_status build_grid_room(int n, rad_scene **out, rad_error *err)
 	return st;
 }
 
+/* The grid room of side n, failing the test without it. */
+static rad_scene *grid_room(int n)
+{
+	rad_scene *s = NULL;
+	rad_error err;
+	assert_int_equal(build_grid_room(n, &s, &err), RAD_OK);
+	return s;
+}
+
+/* The solvers a budget and the cluster records concern. */
+static const rad_solver_kind hier_kinds[2] = {RAD_SOLVER_HR, RAD_SOLVER_RMB};
+
 /*
  * The process-wide limit: under every limit from 2.5 % to 110 % of what
  * a scene needs at its peak, the scene is either made or refused with
@@ -655,14 +667,13 @@ static int64_t budget_options(const rad_scene *s, rad_solver_kind kind,
 static void test_budget_holds(void **state)
 {
 	(void)state;
-	rad_scene *s = NULL;
+	rad_scene *s = grid_room(12);
 	rad_error err;
-	assert_int_equal(build_grid_room(12, &s, &err), RAD_OK);
-	rad_solver_kind kinds[2] = {RAD_SOLVER_HR, RAD_SOLVER_RMB};
 	for (int k = 0; k < 2; k++) {
 		rad_options o;
 		double lux0;
-		int64_t free_peak = budget_options(s, kinds[k], 1, &o, &lux0);
+		int64_t free_peak =
+		        budget_options(s, hier_kinds[k], 1, &o, &lux0);
 		rad_solver *sv = NULL;
 		rad_mem_report m;
 
@@ -727,13 +738,12 @@ static void test_budget_holds(void **state)
 static void test_budget_sweep(void **state)
 {
 	(void)state;
-	rad_scene *s = NULL;
+	rad_scene *s = grid_room(8);
 	rad_error err;
-	assert_int_equal(build_grid_room(8, &s, &err), RAD_OK);
-	rad_solver_kind kinds[2] = {RAD_SOLVER_HR, RAD_SOLVER_RMB};
 	for (int k = 0; k < 2; k++) {
 		rad_options o;
-		int64_t free_peak = budget_options(s, kinds[k], 2, &o, NULL);
+		int64_t free_peak =
+		        budget_options(s, hier_kinds[k], 2, &o, NULL);
 		rad_solver *sv = NULL;
 		rad_mem_report m;
 		int refused = 0, solved = 0;
@@ -778,6 +788,91 @@ static void test_budget_sweep(void **state)
  * used as a stack takes fewer items as the room shrinks (wave_top_fit),
  * all of them without a budget.
  */
+/* Cluster c's sums straight from its polygons' root elements: area
+ * averages of B and dB, and sum A luma(B or dB) n (hier.h, emission). */
+static void cluster_sums(const rad_hier *h, const rad_cluster *c, double B[3],
+                         double dB[3], double nB[3], double ndB[3])
+{
+	double area = 0;
+	for (int k = 0; k < 3; k++)
+		B[k] = dB[k] = nB[k] = ndB[k] = 0;
+	for (uint32_t j = c->first; j < c->first + c->count; j++) {
+		const rad_elem *e = rad_elem_at(h, h->order[j]);
+		const float *n = h->scene->polys[h->order[j]].n;
+		double a = rad_elem_area(h, e);
+		area += a;
+		for (int k = 0; k < 3; k++) {
+			B[k] += a * e->B[k];
+			dB[k] += a * e->dB[k];
+			nB[k] += a * rad_luma(e->B) * n[k];
+			ndB[k] += a * rad_luma(e->dB) * n[k];
+		}
+	}
+	for (int k = 0; k < 3; k++) {
+		B[k] /= area;
+		dB[k] /= area;
+	}
+}
+
+static void expect_near(const float *got, const double *want, double scale,
+                        const char *what, uint32_t id)
+{
+	for (int k = 0; k < 3; k++)
+		if (!(fabs(got[k] - want[k]) <= 1e-5 * scale))
+			fail_msg("cluster %u: %s[%d] %.9g, its polygons say "
+			         "%.9g",
+			         id, what, k, got[k], want[k]);
+}
+
+/* Storage by kind: every cluster keeps B and nB, only inner ones keep dB
+ * and ndB (rad_cluster_inner), and a leaf's are summed when asked.  After
+ * steps of hr and rmb every cluster's four agree with its polygons. */
+static void test_cluster_light_by_kind(void **state)
+{
+	(void)state;
+	rad_scene *s = grid_room(8);
+	rad_error err;
+	for (int k = 0; k < 2; k++) {
+		rad_options o;
+		rad_options_default(&o);
+		o.solver = hier_kinds[k];
+		rad_solver *sv = NULL;
+		assert_int_equal(rad_solver_new(s, &o, &sv, &err), RAD_OK);
+		assert_int_equal(rad_solver_step(sv, &err), RAD_OK);
+		assert_int_equal(rad_solver_step(sv, &err), RAD_OK);
+		const rad_hier *h = &sv->h;
+		uint32_t stack[64], n = 0, leaves = 0, inner = 0, moved = 0;
+		stack[n++] = 0;
+		double top = rad_luma(rad_cluster_at(h, 0)->B);
+		assert_true(top > 0);
+		while (n > 0) {
+			uint32_t id = stack[--n];
+			const rad_cluster *c = rad_cluster_at(h, id);
+			double B[3], dB[3], nB[3], ndB[3];
+			float gdB[3], gndB[3];
+			cluster_sums(h, c, B, dB, nB, ndB);
+			rad_cluster_delta(h, c, gdB, gndB);
+			expect_near(c->B, B, top, "B", id);
+			expect_near(c->nB, nB, top * c->area, "nB", id);
+			expect_near(gdB, dB, top, "dB", id);
+			expect_near(gndB, ndB, top * c->area, "ndB", id);
+			moved += rad_luma(gdB) != 0;
+			if (c->child == RAD_NONE) {
+				leaves++;
+				continue;
+			}
+			inner++;
+			assert_true(n + 2 <= 64);
+			stack[n++] = c->child;
+			stack[n++] = c->child + 1;
+		}
+		assert_true(leaves > 8 && inner == leaves - 1);
+		assert_true(moved > 0); /* dB is not trivially zero */
+		rad_solver_free(sv);
+	}
+	rad_scene_free(s);
+}
+
 static void test_wave_lists(void **state)
 {
 	(void)state;
@@ -953,6 +1048,7 @@ int main(void)
 	        cmocka_unit_test(test_budget_holds),
 	        cmocka_unit_test(test_budget_sweep),
 	        cmocka_unit_test(test_wave_lists),
+	        cmocka_unit_test(test_cluster_light_by_kind),
 	        cmocka_unit_test(test_compact_bvh_same_results),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
