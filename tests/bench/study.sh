@@ -1,10 +1,13 @@
 #!/usr/bin/env bash
 # study.sh -- the reduced-memory study: hr against rmb on the report's
 # scenes, and the speed/accuracy trade.  Writes tests/bench/out/study/:
-# report.md, iterations.csv, summary.csv, trade.csv and PNG plots.
+# report.md, iterations.csv, summary.csv, trade.csv and PNG plots, with
+# memory by kind, and the budget ladder (budget.sh --study, whose own
+# report is then a section of this one).
 #
 # Usage: bash tests/bench/study.sh [--threads N] [--quick]
-#   --quick   leave out the grand hall and the trade ladder's full hall
+#   --quick   leave out the grand hall, the trade ladder's full hall and
+#             the budget ladder
 #
 # A benchmark, not a test: ratios are measured in one run on one machine;
 # nothing asserts on time.  Needs gnuplot (deploy/install-deps.sh).
@@ -59,5 +62,13 @@ fi
 head -n 1 "$T/cornell.csv" >"$OUT/trade.csv"
 for f in "$T"/*.csv; do tail -n +2 "$f" >>"$OUT/trade.csv"; done
 
-/usr/bin/python3 "$ROOT/tests/bench/study_report.py" "$OUT"
+# The budget ladder: what memory_budget at 75, 50 and 25 % of each
+# solver's own peak costs in error, time and re-created links.
+BUDGET=()
+if ((!QUICK)); then
+	bash "$ROOT/tests/bench/budget.sh" --threads "$THREADS" --study
+	BUDGET=("$ROOT/tests/bench/out/budget/report.md")
+fi
+
+/usr/bin/python3 "$ROOT/tests/bench/study_report.py" "$OUT" "${BUDGET[@]}"
 echo "report: $OUT/report.md" >&2

@@ -1,5 +1,6 @@
 """study_report.py -- turn luxrad-study's CSV files into report.md and PNG
-plots (gnuplot, pngcairo).  Usage: study_report.py OUTDIR
+plots (gnuplot, pngcairo).  Usage: study_report.py OUTDIR [BUDGET_REPORT]
+(budget.sh's report.md, made a section of this one).
 
 The report's own figures (fig. 4.4, 4.7, 4.8; docs/ALGORITHM.md §9.3) are
 printed beside ours; they are literature values, not measured here.
@@ -51,6 +52,48 @@ md.append("|---|---|---|---|---|---|")
 for k, v in REPORT.items():
     md.append("| %s | %s |" % (k, " | ".join(v)))
 md.append("")
+
+KINDS = ("geometry", "bvh", "elements_surface", "elements_cluster", "links",
+         "scratch")
+md.append("## Memory by kind")
+md.append("")
+md.append("What each solver held with its scene, by structure, at the end "
+          "of the iteration that held the most (MB; the engine's exact "
+          "counts, without the `study` bookkeeping of re-created links "
+          "that this study turns on: `other` is materials, lights, names "
+          "and the rest), and the bytes per record that follow: surface "
+          "elements, clusters (with the inner ones' records and the "
+          "cluster order), links stored (with hr's list heads).  `peak` "
+          "is the high-water mark, which a step passes between two ends "
+          "of iterations.")
+md.append("")
+md.append("| scene | solver | iteration | " + " | ".join(KINDS) +
+          " | other | total | peak | B/element | B/cluster | B/link |")
+md.append("|" + "---|" * (len(KINDS) + 9))
+for sc in sorted({r["scene"] for r in rows}):
+    for v in ("hr", "rmb"):
+        its = [r for r in rows if r["scene"] == sc and r["solver"] == v]
+        if not its:
+            continue
+        work = lambda r: int(r["mem_total"]) - int(r["mem_study"])
+        r = max(its, key=work)
+        kb = {k: int(r["mem_" + k]) for k in KINDS}
+        total = work(r)
+        per = lambda b, n: "%.1f" % (b / int(n)) if int(n) else "-"
+        md.append("| %s | %s | %s | %s | %.2f | %.2f | %.2f | %s | %s | %s |"
+                  % (sc, v, r["iteration"],
+                     " | ".join("%.2f" % (kb[k] / 1e6) for k in KINDS),
+                     (total - sum(kb.values())) / 1e6, total / 1e6,
+                     max(int(x["mem_peak_work"]) for x in its) / 1e6,
+                     per(kb["elements_surface"], r["elements"]),
+                     per(kb["elements_cluster"], r["clusters"]),
+                     per(kb["links"], r["links"])))
+md.append("")
+
+if len(sys.argv) > 2:  # the budget ladder, its headings one level down
+    for line in open(sys.argv[2]).read().splitlines():
+        md.append("#" + line if line.startswith("#") else line)
+    md.append("")
 
 if trade:
     md.append("## Speed / accuracy trade (converged to 1e-3)")
