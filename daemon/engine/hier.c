@@ -646,7 +646,6 @@ static void leaf_sums(const rad_hier *h, const rad_cluster *cl, double acc[6],
 void rad_cluster_delta(const rad_hier *h, const rad_cluster *cl, float dB[3],
                        float ndB[3])
 {
-	float B[3], tmp[3];
 	if (cl->child != RAD_NONE) {
 		const rad_cluster_inner *in =
 		        &h->inner[rad_cluster_inner_index(cl)];
@@ -656,33 +655,49 @@ void rad_cluster_delta(const rad_hier *h, const rad_cluster *cl, float dB[3],
 			memcpy(ndB, in->ndB, sizeof(in->ndB));
 		return;
 	}
-	double acc[6] = {0}, nb[6] = {0};
-	leaf_sums(h, cl, acc, nb);
-	set_avg(B, dB ? dB : tmp, acc, cl->area);
-	for (int c = 0; ndB && c < 3; c++)
-		ndB[c] = (float)nb[3 + c];
+	/* leaf_sums' dB and ndB alone: the same sums in the same order */
+	double acc[3] = {0, 0, 0}, nb[3] = {0, 0, 0};
+	for (uint32_t j = cl->first; j < cl->first + cl->count; j++) {
+		const rad_elem *e = rad_elem_at(h, h->order[j]);
+		float a = rad_elem_area(h, e);
+		for (int c = 0; c < 3; c++)
+			acc[c] += (double)a * e->dB[c];
+		if (!ndB)
+			continue;
+		const float *n = h->scene->polys[h->order[j]].n;
+		double d = (double)a * rad_luma(e->dB);
+		for (int c = 0; c < 3; c++)
+			nb[c] += d * n[c];
+	}
+	for (int c = 0; c < 3; c++) {
+		if (dB)
+			dB[c] = cl->area > 0 ? (float)(acc[c] / cl->area) : 0;
+		if (ndB)
+			ndB[c] = (float)nb[c];
+	}
 }
 
 /* Post-order: B and nB of every cluster, dB and ndB of the inner ones
  * (a leaf's are summed when asked, rad_cluster_delta), after the
- * polygons' trees are pulled. */
-static void pull_cluster(rad_hier *h, uint32_t id)
+ * polygons' trees are pulled; cluster id's dB and ndB also go to its
+ * parent through dB and ndB. */
+static void pull_cluster(rad_hier *h, uint32_t id, float dB[3], float ndB[3])
 {
 	rad_cluster *cl = rad_cluster_at(h, id);
 	double acc[6] = {0}, nb[6] = {0};
-	float dB[3];
 	if (cl->child == RAD_NONE) {
 		leaf_sums(h, cl, acc, nb);
 		set_avg(cl->B, dB, acc, cl->area);
-		for (int c = 0; c < 3; c++)
+		for (int c = 0; c < 3; c++) {
 			cl->nB[c] = (float)nb[c];
+			ndB[c] = (float)nb[3 + c];
+		}
 		return;
 	}
 	for (uint32_t k = 0; k < 2; k++) {
-		pull_cluster(h, cl->child + k);
-		const rad_cluster *ch = rad_cluster_at(h, cl->child + k);
 		float cdB[3], cndB[3];
-		rad_cluster_delta(h, ch, cdB, cndB);
+		pull_cluster(h, cl->child + k, cdB, cndB);
+		const rad_cluster *ch = rad_cluster_at(h, cl->child + k);
 		acc_node(acc, ch->area, ch->B, cdB);
 		for (int c = 0; c < 3; c++) {
 			nb[c] += ch->nB[c];
@@ -696,6 +711,8 @@ static void pull_cluster(rad_hier *h, uint32_t id)
 		cl->nB[c] = (float)nb[c];
 		in->ndB[c] = (float)nb[3 + c];
 	}
+	memcpy(dB, in->dB, sizeof(in->dB));
+	memcpy(ndB, in->ndB, sizeof(in->ndB));
 }
 
 /* One push: the leaf update, the optional payload and its user data. */
@@ -838,7 +855,8 @@ void rad_hier_pull(rad_hier *h)
 	 * hold records skipped to keep sibling runs in one block. */
 	for (uint32_t i = 0; i < h->scene->npolys; i++)
 		pull_elem(h, i);
-	pull_cluster(h, 0);
+	float dB[3], ndB[3]; /* the root's, kept in its record */
+	pull_cluster(h, 0, dB, ndB);
 }
 
 uint32_t rad_link_new(rad_hier *h, uint32_t rcv, uint32_t src, float ff,
