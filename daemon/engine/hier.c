@@ -704,7 +704,6 @@ static void pull_cluster(rad_hier *h, uint32_t id, float dB[3], float ndB[3])
 			nb[3 + c] += cndB[c];
 		}
 	}
-	cl = rad_cluster_at(h, id);
 	rad_cluster_inner *in = &h->inner[rad_cluster_inner_index(cl)];
 	set_avg(cl->B, in->dB, acc, cl->area);
 	for (int c = 0; c < 3; c++) {
@@ -941,11 +940,10 @@ double rad_cluster_emit(const rad_cluster *c, const float B[3],
                         const float nB[3], double p, double dx, double dy,
                         double dz)
 {
-	const float *v = nB;
 	double mean = rad_luma(B);
 	if (!(p > 1e-6 * c->area) || mean == 0)
 		return 1;
-	double odd = (v[0] * dx + v[1] * dy + v[2] * dz) / mean -
+	double odd = (nB[0] * dx + nB[1] * dy + nB[2] * dz) / mean -
 	             (c->n[0] * dx + c->n[1] * dy + c->n[2] * dz);
 	double e = p + 0.5 * odd;
 	e = e < 0 ? 0 : e > c->area ? c->area : e;

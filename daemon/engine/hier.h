@@ -371,11 +371,10 @@ void rad_elem_patch_id(const rad_hier *h, uint32_t id, rad_patch *p);
  * rad_elem_split gives child k. */
 void rad_region_quarter(float p0[3], float e1[3], float e2[3], int quad, int k);
 
-/* Area of element e, m2: its polygon's times 4^-level (exact). */
-/* The polygon's area times 4^-level, exact: the factor is built from its
- * exponent bits (level <= RAD_ELEM_MAX_LEVEL, so it is a normal float),
- * and a product with a power of two rounds as ldexpf does, without its
- * call (the gather asks for it per link). */
+/* Area of element e, m2: its polygon's times 4^-level, exact: the
+ * factor is built from its exponent bits (level <= RAD_ELEM_MAX_LEVEL, so it is
+ * a normal float), and a product with a power of two rounds as ldexpf does,
+ * without its call (the gather asks for it per link). */
 static inline float rad_elem_area(const rad_hier *h, const rad_elem *e)
 {
 	uint32_t bits = (uint32_t)(127 - 2 * (int)e->level) << 23;
@@ -502,10 +501,10 @@ double rad_cluster_proj(const rad_hier *h, const rad_cluster *c, double dx,
 /*
  * What cluster c sends towards unit d, relative to its mean radiosity
  * times p = P(d), its rad_cluster_proj (DESIGN, emission): of B with
- * mean c->B and nmean c->nB, of dB with its rad_cluster_delta.
+ * B = c->B and nB = c->nB, of dB with its dB and ndB (rad_cluster_delta).
  */
-double rad_cluster_emit(const rad_cluster *c, const float mean[3],
-                        const float nmean[3], double p, double dx, double dy,
+double rad_cluster_emit(const rad_cluster *c, const float B[3],
+                        const float nB[3], double p, double dx, double dy,
                         double dz);
 
 /*

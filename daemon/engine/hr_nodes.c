@@ -386,13 +386,8 @@ static double cluster_emit_factor(const rad_hier *h, uint32_t rcv, uint32_t src,
 double node_emit_factor(const rad_hier *h, uint32_t rcv, uint32_t src,
                         int delta)
 {
-	double d[3];
-	if (!node_is_cluster(src))
-		return 1;
-	return delta ? node_sends(h, rcv, src, 1, d)
-	             : cluster_emit_factor(h, rcv, src,
-	                                   rad_cluster_at(h, src)->B,
-	                                   rad_cluster_at(h, src)->nB);
+	double b[3];
+	return node_is_cluster(src) ? node_sends(h, rcv, src, delta, b) : 1;
 }
 
 double node_sends(const rad_hier *h, uint32_t rcv, uint32_t src, int delta,

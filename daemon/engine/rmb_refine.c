@@ -111,14 +111,18 @@ static void node_dB(const rad_solver *sv, uint32_t t, double out[3])
 			                 : 0;
 		return;
 	}
-	float m[3];
-	if (node_is_cluster(t))
+	if (node_is_cluster(t)) {
+		float m[3];
 		rad_cluster_delta(&sv->h, rad_cluster_at(&sv->h, t), m, NULL);
-	d = node_is_cluster(t) ? m : rad_elem_at(&sv->h, t)->dB;
+		for (int c = 0; c < 3; c++)
+			out[c] = m[c];
+		return;
+	}
+	d = rad_elem_at(&sv->h, t)->dB;
 	for (int c = 0; c < 3; c++)
 		out[c] = d[c];
 	/* The first iteration sends the emission (dB = B = E). */
-	if (st->iter == 0 && !node_is_cluster(t))
+	if (st->iter == 0)
 		node_exposed_emission(&sv->h, t, out);
 }
 

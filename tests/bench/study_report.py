@@ -70,16 +70,16 @@ md.append("")
 md.append("| scene | solver | iteration | " + " | ".join(KINDS) +
           " | other | total | peak | B/element | B/cluster | B/link |")
 md.append("|" + "---|" * (len(KINDS) + 9))
+work = lambda r: int(r["mem_total"]) - int(r["mem_study"])
+per = lambda b, n: "%.1f" % (b / int(n)) if int(n) else "-"
 for sc in sorted({r["scene"] for r in rows}):
     for v in ("hr", "rmb"):
         its = [r for r in rows if r["scene"] == sc and r["solver"] == v]
         if not its:
             continue
-        work = lambda r: int(r["mem_total"]) - int(r["mem_study"])
         r = max(its, key=work)
         kb = {k: int(r["mem_" + k]) for k in KINDS}
         total = work(r)
-        per = lambda b, n: "%.1f" % (b / int(n)) if int(n) else "-"
         md.append("| %s | %s | %s | %s | %.2f | %.2f | %.2f | %s | %s | %s |"
                   % (sc, v, r["iteration"],
                      " | ".join("%.2f" % (kb[k] / 1e6) for k in KINDS),

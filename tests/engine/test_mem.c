@@ -781,13 +781,6 @@ static void test_budget_sweep(void **state)
 	rad_scene_free(s);
 }
 
-/*
- * The refinement's work lists (wave.c): a list gives back its doubling's
- * slack (wave_list_fit) with its items kept; under a budget with no room
- * to double, it grows by an eighth; and a wave off the top of a list
- * used as a stack takes fewer items as the room shrinks (wave_top_fit),
- * all of them without a budget.
- */
 /* Cluster c's sums straight from its polygons' root elements: area
  * averages of B and dB, and sum A luma(B or dB) n (hier.h, emission). */
 static void cluster_sums(const rad_hier *h, const rad_cluster *c, double B[3],
@@ -873,6 +866,13 @@ static void test_cluster_light_by_kind(void **state)
 	rad_scene_free(s);
 }
 
+/*
+ * The refinement's work lists (wave.c): a list gives back its doubling's
+ * slack (wave_list_fit) with its items kept; under a budget with no room
+ * to double, it grows by an eighth; and a wave off the top of a list
+ * used as a stack takes fewer items as the room shrinks (wave_top_fit),
+ * all of them without a budget.
+ */
 static void test_wave_lists(void **state)
 {
 	(void)state;
