@@ -555,6 +555,43 @@ rad_status rad_hier_mesh_uniform(rad_hier *h, double edge, rad_error *err)
 	return RAD_OK;
 }
 
+/* Counts the elements of the tree below id (id included) into *n;
+ * returns the depth to which it is complete: every node above that level
+ * split. */
+static int census_tree(const rad_hier *h, uint32_t id, uint64_t *n)
+{
+	const rad_elem *e = rad_elem_at(h, id);
+	int d = RAD_ELEM_MAX_LEVEL;
+	++*n;
+	if (e->child == RAD_NONE)
+		return 0;
+	for (uint32_t k = 0; k < 4; k++) {
+		int c = census_tree(h, e->child + k, n);
+		if (c < d)
+			d = c;
+	}
+	return d + 1;
+}
+
+_Static_assert(RAD_CENSUS_DEPTHS == RAD_ELEM_MAX_LEVEL + 1, "census depths");
+
+void rad_hier_census(const rad_hier *h, rad_census *out)
+{
+	const rad_scene *s = h->scene;
+	memset(out, 0, sizeof(*out));
+	for (uint32_t p = 0; p < s->npolys; p++) {
+		const rad_material *m = &s->mats[s->polys[p].mat];
+		uint64_t n = 0;
+		int d = census_tree(h, p, &n);
+		out->elements += n;
+		out->polys_by_depth[d]++;
+		out->elements_by_depth[d] += n;
+		if (!(m->rho[0] > 0 || m->rho[1] > 0 || m->rho[2] > 0) &&
+		    (m->emit[0] > 0 || m->emit[1] > 0 || m->emit[2] > 0))
+			out->below_emitters += n - 1;
+	}
+}
+
 /* Set B = E on the leaves below element id; I and dB cleared. */
 static void reset_tree(rad_hier *h, uint32_t id)
 {

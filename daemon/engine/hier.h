@@ -402,6 +402,9 @@ uint32_t rad_elem_split(rad_hier *h, uint32_t id);
 /* Subdivide every polygon uniformly until edges are <= edge (matrix mesh). */
 rad_status rad_hier_mesh_uniform(rad_hier *h, double edge, rad_error *err);
 
+/* Where the surface elements sit (rad_solver_census, rad.h). */
+void rad_hier_census(const rad_hier *h, rad_census *out);
+
 /* Set B = E and clear I, dB on every node (pull included). */
 void rad_hier_reset_emission(rad_hier *h);
 

@@ -166,6 +166,11 @@ void rad_solver_memory(const rad_solver *sv, rad_mem_report *out)
 	rad_mem_report_add(&sv->mem, out);
 }
 
+void rad_solver_census(const rad_solver *sv, rad_census *out)
+{
+	rad_hier_census(&sv->h, out);
+}
+
 void rad_solver_free(rad_solver *sv)
 {
 	if (!sv)

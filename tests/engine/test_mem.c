@@ -172,18 +172,28 @@ static void test_injected_failure_counts_nothing(void **state)
 	assert_int_equal(r.total, 0);
 }
 
-/* A small closed room with a light: build, solve, free; all back to 0. */
-static rad_scene *make_room(void)
+/* A new scene with two materials, a grey wall and a pure emitter (a
+ * lamp), and one node. */
+static rad_scene *wall_and_lamp(const char *name, uint32_t *wall,
+                                uint32_t *lamp, uint32_t *node)
 {
 	rad_scene *s = NULL;
 	rad_error err;
 	assert_int_equal(rad_scene_new(&s, &err), RAD_OK);
 	double rho[3] = {0.5, 0.5, 0.5}, zero[3] = {0, 0, 0};
 	double lum[3] = {100, 100, 100};
+	assert_int_equal(rad_scene_add_material(s, rho, zero, wall, &err), 0);
+	assert_int_equal(rad_scene_add_material(s, zero, lum, lamp, &err), 0);
+	assert_int_equal(rad_scene_add_node(s, name, node, &err), 0);
+	return s;
+}
+
+/* A small closed room with a light: build, solve, free; all back to 0. */
+static rad_scene *make_room(void)
+{
+	rad_error err;
 	uint32_t wall, lamp, node;
-	assert_int_equal(rad_scene_add_material(s, rho, zero, &wall, &err), 0);
-	assert_int_equal(rad_scene_add_material(s, zero, lum, &lamp, &err), 0);
-	assert_int_equal(rad_scene_add_node(s, "room", &node, &err), 0);
+	rad_scene *s = wall_and_lamp("room", &wall, &lamp, &node);
 	/* Unit cube, faces pointing inwards, two triangles each. */
 	static const double q[6][4][3] = {
 	        {{0, 0, 0}, {1, 0, 0}, {1, 0, 1}, {0, 0, 1}}, /* floor y=0 */
@@ -817,6 +827,20 @@ static void expect_near(const float *got, const double *want, double scale,
 			         id, what, k, got[k], want[k]);
 }
 
+/* A solver of kind k on s, with the defaults, two steps on. */
+static rad_solver *two_steps(const rad_scene *s, rad_solver_kind k)
+{
+	rad_options o;
+	rad_error err;
+	rad_solver *sv = NULL;
+	rad_options_default(&o);
+	o.solver = k;
+	assert_int_equal(rad_solver_new(s, &o, &sv, &err), RAD_OK);
+	assert_int_equal(rad_solver_step(sv, &err), RAD_OK);
+	assert_int_equal(rad_solver_step(sv, &err), RAD_OK);
+	return sv;
+}
+
 /* Storage by kind: every cluster keeps B and nB, only inner ones keep dB
  * and ndB (rad_cluster_inner), and a leaf's are summed when asked.  After
  * steps of hr and rmb every cluster's four agree with its polygons. */
@@ -824,15 +848,8 @@ static void test_cluster_light_by_kind(void **state)
 {
 	(void)state;
 	rad_scene *s = grid_room(8);
-	rad_error err;
 	for (int k = 0; k < 2; k++) {
-		rad_options o;
-		rad_options_default(&o);
-		o.solver = hier_kinds[k];
-		rad_solver *sv = NULL;
-		assert_int_equal(rad_solver_new(s, &o, &sv, &err), RAD_OK);
-		assert_int_equal(rad_solver_step(sv, &err), RAD_OK);
-		assert_int_equal(rad_solver_step(sv, &err), RAD_OK);
+		rad_solver *sv = two_steps(s, hier_kinds[k]);
 		const rad_hier *h = &sv->h;
 		uint32_t stack[64], n = 0, leaves = 0, inner = 0, moved = 0;
 		stack[n++] = 0;
@@ -861,6 +878,95 @@ static void test_cluster_light_by_kind(void **state)
 		}
 		assert_true(leaves > 8 && inner == leaves - 1);
 		assert_true(moved > 0); /* dB is not trivially zero */
+		rad_solver_free(sv);
+	}
+	rad_scene_free(s);
+}
+
+/*
+ * Where the elements sit (rad_census): a parallelogram split to a full
+ * 4 x 4 with one more corner split is complete to depth 2 (25 elements);
+ * a pure emitter split once and then in one quarter, to depth 1 (9), its
+ * 8 below the root counted as the emitter's; an unsplit polygon, depth 0.
+ * Then a solver's census counts what its statistics count.
+ */
+static void test_census(void **state)
+{
+	(void)state;
+	rad_error err;
+	uint32_t wall, lamp, node;
+	rad_scene *s = wall_and_lamp("parts", &wall, &lamp, &node);
+	static const double quad[9 * 2] = {
+	        0, 0, 0, 2, 0, 0, 2, 2, 0, /* half 1 */
+	        0, 0, 0, 2, 2, 0, 0, 2, 0, /* half 2 */
+	};
+	static const double tri[9 * 2] = {
+	        5, 0, 0, 6, 0, 0, 5, 1, 0, /* the emitter */
+	        8, 0, 0, 9, 0, 0, 8, 1, 0, /* left whole */
+	};
+	assert_int_equal(rad_scene_add_triangles(s, wall, node, quad, 2, &err),
+	                 RAD_OK);
+	assert_int_equal(rad_scene_add_triangles(s, lamp, node, tri, 1, &err),
+	                 RAD_OK);
+	assert_int_equal(
+	        rad_scene_add_triangles(s, wall, node, tri + 9, 1, &err),
+	        RAD_OK);
+	assert_int_equal(rad_scene_commit(s, &err), RAD_OK);
+	assert_int_equal(s->npolys, 3);
+	uint32_t q = RAD_NONE, e = RAD_NONE;
+	for (uint32_t i = 0; i < 3; i++) {
+		if (s->polys[i].quad)
+			q = i;
+		else if (s->polys[i].mat == lamp)
+			e = i;
+	}
+	assert_int_not_equal(q, RAD_NONE);
+	assert_int_not_equal(e, RAD_NONE);
+	rad_mem mem;
+	rad_hier h;
+	rmb_hier(s, &mem, &h);
+	uint32_t c = rad_elem_split(&h, q), g = RAD_NONE;
+	assert_int_not_equal(c, RAD_NONE);
+	for (uint32_t k = 0; k < 4; k++) {
+		uint32_t gk = rad_elem_split(&h, c + k);
+		assert_int_not_equal(gk, RAD_NONE);
+		if (k == 0)
+			g = gk;
+	}
+	assert_int_not_equal(rad_elem_split(&h, g + 3), RAD_NONE);
+	c = rad_elem_split(&h, e);
+	assert_int_not_equal(c, RAD_NONE);
+	assert_int_not_equal(rad_elem_split(&h, c + 2), RAD_NONE);
+	rad_census cs;
+	rad_hier_census(&h, &cs);
+	assert_int_equal(cs.elements, 25 + 9 + 1);
+	assert_int_equal(cs.polys_by_depth[0], 1);
+	assert_int_equal(cs.polys_by_depth[1], 1);
+	assert_int_equal(cs.polys_by_depth[2], 1);
+	assert_int_equal(cs.elements_by_depth[0], 1);
+	assert_int_equal(cs.elements_by_depth[1], 9);
+	assert_int_equal(cs.elements_by_depth[2], 25);
+	for (int d = 3; d < RAD_CENSUS_DEPTHS; d++)
+		assert_int_equal(cs.polys_by_depth[d], 0);
+	assert_int_equal(cs.below_emitters, 8);
+	rad_hier_destroy(&h);
+	rad_scene_free(s);
+
+	s = grid_room(8);
+	for (int k = 0; k < 2; k++) {
+		rad_solver *sv = two_steps(s, hier_kinds[k]);
+		rad_stats st;
+		rad_solver_stats(sv, &st);
+		rad_solver_census(sv, &cs);
+		uint64_t np = 0, ne = 0;
+		for (int d = 0; d < RAD_CENSUS_DEPTHS; d++) {
+			np += cs.polys_by_depth[d];
+			ne += cs.elements_by_depth[d];
+		}
+		assert_int_equal(cs.elements, st.elements);
+		assert_int_equal(ne, st.elements);
+		assert_int_equal(np, s->npolys);
+		assert_true(st.elements > 2 * (uint64_t)s->npolys);
 		rad_solver_free(sv);
 	}
 	rad_scene_free(s);
@@ -1049,6 +1155,7 @@ int main(void)
 	        cmocka_unit_test(test_budget_sweep),
 	        cmocka_unit_test(test_wave_lists),
 	        cmocka_unit_test(test_cluster_light_by_kind),
+	        cmocka_unit_test(test_census),
 	        cmocka_unit_test(test_compact_bvh_same_results),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);

@@ -752,6 +752,27 @@ rad_status rad_solver_query(const rad_solver *sv, const double *pts, size_t n,
                             double tol, double *lux, double *error_lux,
                             rad_error *err);
 
+/*
+ * Where the surface elements sit, for the reduced-memory study.  A
+ * polygon's quadtree is complete to depth d when every element above
+ * level d is split (d = 0: its root is a leaf, or one of its children
+ * is).  A regular grid of 4^d radiosity values (a radiosity texture,
+ * docs/ALGORITHM.md §10) could stand for the (4^(d+1) - 4) / 3 elements
+ * of levels 1 to d; the elements below them are not counted in that.
+ * Emitters: polygons that reflect nothing (rho 0) and emit, whose
+ * radiosity is E all over: the elements below their roots are what
+ * splitting them as sources made.  Not to be called while another thread
+ * steps the solver.
+ */
+#define RAD_CENSUS_DEPTHS 17 /* 0 .. RAD_ELEM_MAX_LEVEL */
+typedef struct rad_census {
+	uint64_t elements; /* surface elements, the roots included */
+	uint64_t polys_by_depth[RAD_CENSUS_DEPTHS];    /* complete to d */
+	uint64_t elements_by_depth[RAD_CENSUS_DEPTHS]; /* in those trees */
+	uint64_t below_emitters; /* below the roots of pure emitters */
+} rad_census;
+void rad_solver_census(const rad_solver *sv, rad_census *out);
+
 /* Per-leaf results, for export: calls fn once per leaf element. */
 typedef void (*rad_leaf_fn)(void *ud, uint32_t node, const double p[4][3],
                             int nv, const double radiosity[3],
