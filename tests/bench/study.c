@@ -12,6 +12,9 @@
  *         iterations.csv  one row per scene x solver x iteration: every
  *                         counter of rad_stats, memory by structure, the
  *                         energy histogram
+ *         census.csv      one row per scene x solver: where its elements
+ *                         sit at the end (rad_census: by the depth to
+ *                         which their polygon's quadtree is complete)
  *         summary.csv     one row per scene: links, peak memory, time for
  *                         N iterations, hr and rmb, their ratios, and the
  *                         grid difference (RMS, relative to hr's mean)
@@ -211,14 +214,46 @@ static void csv_row(FILE *f, const char *scene, const char *solver,
 	fputc('\n', f);
 }
 
+/* census.csv: where the elements sit at the end of a solve (rad_census):
+ * per depth d to which a polygon's quadtree is complete, the polygons and
+ * the elements of their trees. */
+static void census_header(FILE *f)
+{
+	fprintf(f, "scene,solver,polygons,elements,below_emitters");
+	for (int d = 0; d < RAD_CENSUS_DEPTHS; d++)
+		fprintf(f, ",polys_d%d", d);
+	for (int d = 0; d < RAD_CENSUS_DEPTHS; d++)
+		fprintf(f, ",elements_d%d", d);
+	fputc('\n', f);
+}
+
+static void census_row(FILE *f, const char *scene, const char *solver,
+                       const rad_solver *sv)
+{
+	rad_census c;
+	uint64_t np = 0;
+	rad_solver_census(sv, &c);
+	for (int d = 0; d < RAD_CENSUS_DEPTHS; d++)
+		np += c.polys_by_depth[d];
+	fprintf(f, "%s,%s,%llu,%llu,%llu", scene, solver,
+	        (unsigned long long)np, (unsigned long long)c.elements,
+	        (unsigned long long)c.below_emitters);
+	for (int d = 0; d < RAD_CENSUS_DEPTHS; d++)
+		fprintf(f, ",%llu", (unsigned long long)c.polys_by_depth[d]);
+	for (int d = 0; d < RAD_CENSUS_DEPTHS; d++)
+		fprintf(f, ",%llu", (unsigned long long)c.elements_by_depth[d]);
+	fputc('\n', f);
+}
+
 /*
  * Solve: `iterations` steps, or to tol when iterations is 0.  Per-iteration
- * rows go to csv when given.  Fills r (r->lux allocated for the grid).
+ * rows go to csv, and where the elements sit at the end to census, when
+ * given.  Fills r (r->lux allocated for the grid).
  */
 static int solve(const rad_scene *sc, const rad_options *opt,
                  uint32_t iterations, double tol, uint32_t max_iter,
-                 const double *grid, size_t npts, FILE *csv, const char *name,
-                 const char *label, run_result *r)
+                 const double *grid, size_t npts, FILE *csv, FILE *census,
+                 const char *name, const char *label, run_result *r)
 {
 	rad_solver *sv;
 	rad_error err;
@@ -241,6 +276,8 @@ static int solve(const rad_scene *sc, const rad_options *opt,
 		if (!iterations && r->last.error_estimate <= tol)
 			break;
 	}
+	if (census)
+		census_row(census, name, label, sv);
 	r->iterations = r->last.iteration;
 	r->seconds = r->last.seconds_total;
 	r->peak = r->last.mem.peak_work;
@@ -285,9 +322,11 @@ static int run_study(const study_args *a)
 {
 	FILE *csv = open_out(a, "iterations.csv");
 	FILE *sum = open_out(a, "summary.csv");
-	if (!csv || !sum)
+	FILE *census = open_out(a, "census.csv");
+	if (!csv || !sum || !census)
 		return 1;
 	csv_header(csv);
+	census_header(census);
 	fprintf(sum, "scene,polygons,eps,iterations,links_hr,links_rmb,"
 	             "links_ratio,peak_hr,peak_rmb,peak_ratio,seconds_hr,"
 	             "seconds_rmb,time_ratio,grid_rms_rel,grid_mean_hr,"
@@ -317,7 +356,7 @@ static int run_study(const study_args *a)
 			fprintf(stderr, "luxrad-study: %s: %s...\n", name,
 			        label[k]);
 			rc = solve(sc, &o, a->iterations, 0, 0, grid, npts, csv,
-			           name, label[k], &r[k]);
+			           census, name, label[k], &r[k]);
 		}
 		if (!grid)
 			rc = 1;
@@ -358,6 +397,7 @@ static int run_study(const study_args *a)
 	}
 	fclose(csv);
 	fclose(sum);
+	fclose(census);
 	return rc;
 }
 
@@ -398,7 +438,7 @@ static int run_trade(const study_args *a)
 			fprintf(stderr, "luxrad-study: %s: reference...\n",
 			        name);
 			rc = solve(sc, &o, 0, a->tol / 10, 200, grid, npts,
-			           NULL, name, "reference", &r);
+			           NULL, NULL, name, "reference", &r);
 			if (!rc)
 				memcpy(ref, r.lux, npts * sizeof(double));
 			free(r.lux);
@@ -422,7 +462,7 @@ static int run_trade(const study_args *a)
 				        name, rad_solver_kind_name(o.solver),
 				        ladder[e]);
 				rc = solve(sc, &o, 0, a->tol, a->max_iter, grid,
-				           npts, NULL, name, NULL, &r);
+				           npts, NULL, NULL, name, NULL, &r);
 				if (rc)
 					break;
 				double m = 0;

@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # study.sh -- the reduced-memory study: hr against rmb on the report's
 # scenes, and the speed/accuracy trade.  Writes tests/bench/out/study/:
-# report.md, iterations.csv, summary.csv, trade.csv and PNG plots, with
-# memory by kind, and the budget ladder (budget.sh --study, whose own
+# report.md, iterations.csv, summary.csv, census.csv, trade.csv and PNG
+# plots, with memory by kind, where the elements sit, and the budget ladder (budget.sh --study, whose own
 # report is then a section of this one).
 #
 # Usage: bash tests/bench/study.sh [--threads N] [--quick]

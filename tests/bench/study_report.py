@@ -15,6 +15,9 @@ rows = list(csv.DictReader(open(os.path.join(out, "iterations.csv"))))
 summary = list(csv.DictReader(open(os.path.join(out, "summary.csv"))))
 trade_path = os.path.join(out, "trade.csv")
 trade = list(csv.DictReader(open(trade_path))) if os.path.exists(trade_path) else []
+census_path = os.path.join(out, "census.csv")
+census = (list(csv.DictReader(open(census_path)))
+          if os.path.exists(census_path) else [])
 
 REPORT = {  # scene: links classic, links new, MB classic, MB new, time
     "herd.glb": ("212,848", "209,433", "64.4", "56.0", "39m36s / 27m48s"),
@@ -89,6 +92,54 @@ for sc in sorted({r["scene"] for r in rows}):
                      per(kb["elements_cluster"], r["clusters"]),
                      per(kb["links"], r["links"])))
 md.append("")
+
+
+def census_section(census, rows):
+    """Where the elements sit, and what radiosity textures could save."""
+    md.append("## Where the elements sit")
+    md.append("")
+    md.append("At the end of each solve (`census.csv`, `rad_census`): the "
+              "surface elements, the share of them in polygons whose "
+              "quadtree is complete to depth 2 or more (every element "
+              "above that level split), the elements of levels 1 to d of "
+              "those trees and the 4^d cells of a regular grid that could "
+              "stand for them (a radiosity texture, report §5.2), with "
+              "their bytes: the elements at this run's bytes per element, "
+              "the grid at 36 bytes a cell (a leaf's B, I and dB) or 12 "
+              "(B alone: the result).  Emitters: elements below the roots "
+              "of polygons that only emit.")
+    md.append("")
+    md.append("| scene | solver | polygons | elements | per polygon | in "
+              "trees complete to >= 2 | levels 1..d | cells | MB now | MB "
+              "as grids (B, I, dB / B) | below emitters |")
+    md.append("|" + "---|" * 11)
+    for c in census:
+        its = [r for r in rows if r["scene"] == c["scene"]
+               and r["solver"] == c["solver"]]
+        last = max(its, key=lambda r: int(r["iteration"])) if its else None
+        bpe = (int(last["mem_elements_surface"]) / int(last["elements"])
+               if last and int(last["elements"]) else float("nan"))
+        n = int(c["elements"])
+        deep = inner = cells = 0
+        d = 2
+        while "polys_d%d" % d in c:
+            polys = int(c["polys_d%d" % d])
+            deep += int(c["elements_d%d" % d])
+            inner += polys * (4 ** (d + 1) - 4) // 3
+            cells += polys * 4 ** d
+            d += 1
+        md.append("| %s | %s | %s | %d | %.2f | %.1f %% | %d | %d | %.2f | "
+                  "%.2f / %.2f | %s |" % (
+                      c["scene"], c["solver"], c["polygons"], n,
+                      n / max(int(c["polygons"]), 1),
+                      100.0 * deep / max(n, 1), inner, cells,
+                      inner * bpe / 1e6, cells * 36 / 1e6, cells * 12 / 1e6,
+                      c["below_emitters"]))
+    md.append("")
+
+
+if census:
+    census_section(census, rows)
 
 if len(sys.argv) > 2:  # the budget ladder, its headings one level down
     for line in open(sys.argv[2]).read().splitlines():
