@@ -506,4 +506,5 @@ const rad_solver_ops rad_solver_hr_ops = {
         .init = hr_init,
         .step = hr_step,
         .destroy = hr_destroy,
+        .restart_steps = 2,
 };

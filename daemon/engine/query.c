@@ -558,6 +558,10 @@ rad_status rad_solver_query(const rad_solver *sv, const double *pts, size_t n,
 {
 	if (!sv)
 		return rad_fail(err, RAD_ERR_INVALID, "illuminance: no solver");
+	if (!sv->impl) /* a restart failed (solver.c): no hierarchy */
+		return rad_fail(err, RAD_ERR_STATE,
+		                "illuminance: the solver failed and has no "
+		                "solution");
 	double se = sv->stats.error_estimate;
 	rad_query_args a = {pts,
 	                    n,
@@ -608,7 +612,7 @@ void rad_query_leaves(const rad_hier *h, rad_leaf_fn fn, void *ud)
 
 void rad_solver_leaves(const rad_solver *sv, rad_leaf_fn fn, void *ud)
 {
-	if (!sv || !fn)
+	if (!sv || !fn || !sv->impl)
 		return;
 	rad_query_leaves(&sv->h, fn, ud);
 }

@@ -219,6 +219,9 @@ rad_status rad_solution_new(const rad_solver *sv, rad_solution **out,
 	*out = NULL;
 	if (!sv)
 		return rad_fail(err, RAD_ERR_INVALID, "solution: no solver");
+	if (!sv->impl) /* a restart failed (solver.c): no hierarchy */
+		return rad_fail(err, RAD_ERR_STATE,
+		                "solution: the solver failed and has none");
 	const rad_hier *src = &sv->h;
 	uint32_t np = sv->scene->npolys;
 	rad_solution *s = solution_alloc(sv->scene);

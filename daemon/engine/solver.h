@@ -18,6 +18,10 @@ typedef struct rad_solver_ops {
 	 * counts memory and bumps sv->stats.iteration. */
 	rad_status (*step)(rad_solver *sv, rad_error *err);
 	void (*destroy)(rad_solver *sv); /* frees sv->impl */
+	/* Under a memory budget: a budget reached in one of the first
+	 * restart_steps steps starts the solve over at twice eps (solver.c,
+	 * "Budget restarts"); 0: never. */
+	uint32_t restart_steps;
 } rad_solver_ops;
 
 struct rad_solver {
@@ -32,6 +36,8 @@ struct rad_solver {
 	double flux_scale;    /* photopic flux of all sources (lm), > 0 */
 	double tol;           /* convergence tolerance for error_estimate */
 	double prev_residual; /* residual of the previous step, 0 before */
+	uint32_t done;        /* steps of the solve since its last start */
+	uint32_t redo;        /* steps a restart has still to run again */
 };
 
 extern const rad_solver_ops rad_solver_matrix_ops;

@@ -664,6 +664,11 @@ typedef enum rad_stat_kind {
 	  "error_estimate is at most the tolerance")                           \
 	X(budget_reached, "", "budget_reached", BOOL, GAUGE, "",               \
 	  "the memory budget stopped refinement in the last iteration")        \
+	X(budget_restarts, "", "budget_restarts", U32, TOTAL, "",              \
+	  "hr: times the budget, reached in the first two steps, started the " \
+	  "solve over at twice eps")                                           \
+	X(eps, "", "eps", DOUBLE, GAUGE, "",                                   \
+	  "refinement threshold in use (a budget restart doubles it)")        \
 	X(mem, "", "memory", MEM, GAUGE, "B", "solver and scene memory")
 /* clang-format on */
 
