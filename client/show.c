@@ -101,6 +101,11 @@ static void print_stats(const json_t *st)
 	       lx_jbytes(mem, "total_bytes", c, sizeof c),
 	       lx_jbytes(mem, "peak_bytes", d, sizeof d),
 	       lx_jbytes(mem, "peak_own_bytes", e, sizeof e));
+	if (lx_jint(st, "budget_restarts") > 0)
+		printf("the memory budget started the solve over %lld times, "
+		       "at eps %s\n",
+		       lx_jint(st, "budget_restarts"),
+		       lx_jnum(st, "eps", "%g", a, sizeof a));
 }
 
 int lx_cmd_info(lx_ctx *cx)

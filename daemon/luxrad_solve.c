@@ -297,6 +297,10 @@ static void print_text_iterations(const report *r)
 	       (unsigned long long)r->final->links_cc,
 	       (unsigned long long)r->final->links_light,
 	       (unsigned long long)r->lg->rays);
+	if (r->final->budget_restarts)
+		printf("the memory budget, reached in the first two "
+		       "iterations, started the solve over %u times: eps %g\n",
+		       r->final->budget_restarts, r->final->eps);
 }
 
 static void print_text(const report *r)
