@@ -56,6 +56,8 @@ def main():
                 st = o.get("stats", {})
                 run["budget_held"] = st.get("links", {}).get("budget_held")
                 run["budget_reached"] = st.get("budget_reached")
+                run["restarts"] = st.get("budget_restarts", 0)
+                run["eps"] = st.get("eps")
                 its = o.get("per_iteration", [])
                 run["study"] = bool(o.get("options", {}).get("study"))
                 for key in ("transient", "recreated", "budget_transient"):
@@ -71,6 +73,7 @@ def main():
     cols = ["scene", "solver", "tag", "budget_mib", "status",
             "solver_peak_mib", "wall_s", "iterations", "links", "worst",
             "mean", "mean_ratio", "budget_held", "budget_reached",
+            "restarts", "eps",
             "transient", "recreated", "budget_transient"]
     with open(os.path.join(out, "runs.csv"), "w", newline="") as f:
         w = csv.writer(f)
@@ -84,16 +87,18 @@ def main():
           "the unbudgeted run's.  Transient: links gathered without being "
           "stored, over all iterations (rmb), of which made so by the "
           "budget; re-created: links stored again after an earlier "
-          "iteration deleted their pair (with budget.sh --study).", "",
+          "iteration deleted their pair (with budget.sh --study); "
+          "restarts: hr started over at twice eps, the budget reached in "
+          "its first two iterations (eps: the one it went on with).", "",
           "| scene | solver | budget | MiB | status | solver peak MiB | "
           "wall s | links | worst | mean | mean x | held (last it.) | "
-          "transient (budget) | re-created |",
+          "transient (budget) | re-created | restarts (eps) |",
           "|---|---|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|"
-          "---:|"]
+          "---:|---:|"]
     for r in rows:
         ok = r["status"] == "ok"
         md.append("| %s | %s | %s | %.1f | %s | %.1f | %.2f | %s | %s | "
-                  "%s | %s | %s | %s | %s |" % (
+                  "%s | %s | %s | %s | %s | %s |" % (
                       r["scene"], r["solver"],
                       "none" if r["tag"] == "none"
                       else "%d %%" % round(100 * float(r["tag"])),
@@ -106,7 +111,9 @@ def main():
                       r.get("budget_held", "") if ok else "",
                       "%d (%d)" % (r["transient"], r["budget_transient"])
                       if ok else "",
-                      r["recreated"] if ok and r["study"] else ""))
+                      r["recreated"] if ok and r["study"] else "",
+                      "%d (%g)" % (r["restarts"], r["eps"])
+                      if ok and r.get("restarts") else ""))
     with open(os.path.join(out, "report.md"), "w") as f:
         f.write("\n".join(md) + "\n")
     print("\n".join(md))
