@@ -277,9 +277,23 @@ static void test_a_solver_that_does_not_stop_is_killed(void **state)
 	json_decref(info);
 
 	/* Resumed: a new process replays iteration 1, then goes deaf
-	 * again; job.cancel is answered the same way. */
+	 * again; job.cancel is answered the same way.  A cancel waits for
+	 * the replay's step by design (srv_job_raise_cancel_locked): the
+	 * replay must end first, and under TSan one Cornell step took
+	 * 6.4 s on a slow machine, where a fixed 1 s wait timed it too. */
 	json_decref(dm_ok(c, "{s:s, s:O}", "cmd", "job.resume", "job", job));
-	dm_sleep_ms(1000);
+	dm_sleep_ms(300);
+	for (double end = dm_now_ms() + 60000; dm_now_ms() < end;) {
+		json_t *r =
+		        dm_ok(c, "{s:s, s:O}", "cmd", "job.info", "job", job);
+		int replaying = json_is_true(
+		        json_object_get(dm_get(r, "job"), "replaying"));
+		json_decref(r);
+		if (!replaying)
+			break;
+		dm_sleep_ms(50);
+	}
+	dm_sleep_ms(300);
 	s = timed(c, "job.cancel", job);
 	print_message("job.cancel of a deaf solver replied in %.2f s\n", s);
 	assert_true(s < 5.0);
