@@ -35,6 +35,15 @@ const char *rad_solver_kind_name(rad_solver_kind k)
 	return (unsigned)k < RAD_SOLVER_NKINDS ? solver_table[k]->name : "?";
 }
 
+/* The solver's own state and hierarchy, freed (sv->impl NULL). */
+static void solver_drop(rad_solver *sv)
+{
+	if (sv->ops && sv->impl)
+		sv->ops->destroy(sv);
+	sv->impl = NULL;
+	rad_hier_destroy(&sv->h);
+}
+
 /* The solver's hierarchy and own state, from nothing. */
 static rad_status solver_build(rad_solver *sv, rad_error *err)
 {
@@ -142,9 +151,7 @@ static int must_restart(const rad_solver *sv)
  * is left without a hierarchy (sv->impl NULL): it may only be freed. */
 static rad_status restart(rad_solver *sv, uint32_t steps, rad_error *err)
 {
-	sv->ops->destroy(sv);
-	sv->impl = NULL;
-	rad_hier_destroy(&sv->h);
+	solver_drop(sv);
 	sv->opt.eps *= 2;
 	sv->stats.budget_restarts++;
 	clear_step_counts(&sv->stats);
@@ -156,10 +163,7 @@ static rad_status restart(rad_solver *sv, uint32_t steps, rad_error *err)
 		char why[sizeof(err->msg)] = "";
 		if (err)
 			memcpy(why, err->msg, sizeof(why));
-		if (sv->impl)
-			sv->ops->destroy(sv);
-		sv->impl = NULL;
-		rad_hier_destroy(&sv->h);
+		solver_drop(sv);
 		return rad_fail(err, st,
 		                "%s: starting over at eps %g under the memory "
 		                "budget: %s",
@@ -179,19 +183,15 @@ static rad_status one_step(rad_solver *sv, uint32_t iteration, rad_error *err)
 	return st;
 }
 
-/* The steps of one iteration: the solver's next one, and the restarts
- * it calls for with the steps they run again; or, after a cancel among
- * those, the ones still to run. */
+/* The steps of one iteration: the solver's next one (sv->redo 1), and
+ * the restarts it calls for with the steps they run again; or, after a
+ * cancel among those, the ones still to run. */
 static rad_status iteration_steps(rad_solver *sv, rad_error *err)
 {
 	uint32_t it = sv->stats.iteration;
 	rad_status st = RAD_OK;
-	if (!sv->redo) {
-		st = one_step(sv, it, err);
-		if (st || !must_restart(sv))
-			return st;
-		st = restart(sv, it + 1, err);
-	}
+	if (!sv->redo)
+		sv->redo = 1;
 	while (!st && sv->redo) {
 		st = one_step(sv, it, err);
 		if (!st)
@@ -296,9 +296,7 @@ void rad_solver_free(rad_solver *sv)
 {
 	if (!sv)
 		return;
-	if (sv->ops && sv->impl)
-		sv->ops->destroy(sv);
-	rad_hier_destroy(&sv->h);
+	solver_drop(sv);
 	rad_par_free(sv->par);
 	free(sv);
 }
