@@ -9,8 +9,9 @@
  *     The four children of an element are stored together (child .. child+3).
  *   - clusters (rad_cluster): a binary volume hierarchy over all polygons
  *     up to one root cluster (id 0).  An inner cluster has two child
- *     clusters (child, child+1); a leaf cluster holds up to
- *     RAD_CLUSTER_LEAF_MAX polygons, a contiguous range of order[].
+ *     clusters (child, child+1); a leaf cluster holds
+ *     RAD_CLUSTER_LEAF_MAX polygons (the last leaf of the order may hold
+ *     fewer), a contiguous range of order[].
  *     Every cluster covers a contiguous range of order[], so "the polygons
  *     in this cluster" is a range, never a list walk.
  *   - links: receiver <- source transfers with their form factor, of

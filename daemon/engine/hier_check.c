@@ -14,7 +14,9 @@
  *     are nleaves;
  *   - clusters: the children of a cluster split its range of order[] in
  *     two, in order, and its area (a cluster keeps no parent: nothing
- *     walks up the tree);
+ *     walks up the tree); a leaf holds RAD_CLUSTER_LEAF_MAX
+ *     polygons, but for the last leaf of the order, which may hold
+ *     fewer;
  *   - links: a node's list (classic HR's rad_hlink) stays inside the
  *     pool without a loop, and each link names a source inside its
  *     pool.
@@ -99,8 +101,14 @@ static int check_cluster(checker *c, uint32_t id, unsigned depth)
 	if (h->lists && check_links(c, *rad_node_links(h, id | RAD_TAG_CLUSTER),
 	                            id | RAD_TAG_CLUSTER) != 0)
 		return -1;
-	if (cl->child == RAD_NONE)
+	if (cl->child == RAD_NONE) {
+		if (cl->count > RAD_CLUSTER_LEAF_MAX)
+			return fail(c, "leaf cluster of too many polygons", id);
+		if (cl->count < RAD_CLUSTER_LEAF_MAX &&
+		    cl->first + cl->count != h->scene->npolys)
+			return fail(c, "leaf cluster not full", id);
 		return 0;
+	}
 	if ((uint64_t)cl->child + 2 > h->clusters.count)
 		return fail(c, "cluster's children outside the pool", id);
 	const rad_cluster *a = rad_cluster_at(h, cl->child);

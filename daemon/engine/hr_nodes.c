@@ -116,7 +116,11 @@ double node_size(const rad_hier *h, uint32_t t)
 	return rad_elem_edge(h, rad_elem_at(h, t));
 }
 
-int node_children(rad_hier *h, uint32_t t, uint32_t out[4])
+/* An element's four quarters go to the same out[] as a leaf cluster's
+ * polygons. */
+_Static_assert(RAD_CLUSTER_LEAF_MAX >= 4, "node_children writes 4");
+
+int node_children(rad_hier *h, uint32_t t, uint32_t out[RAD_CLUSTER_LEAF_MAX])
 {
 	if (node_is_cluster(t)) {
 		const rad_cluster *c = rad_cluster_at(h, t);

@@ -54,7 +54,7 @@ v3 node_center(const rad_hier *h, uint32_t t);
  * (elements are split on demand: not thread-safe).  Returns the count, 0
  * when out of memory.
  */
-int node_children(rad_hier *h, uint32_t t, uint32_t out[4]);
+int node_children(rad_hier *h, uint32_t t, uint32_t out[RAD_CLUSTER_LEAF_MAX]);
 
 /* 0 when src cannot send anything to rcv (both sides face away). */
 int node_facing(const rad_hier *h, uint32_t rcv, uint32_t src);

@@ -482,7 +482,7 @@ static int post(rad_solver *sv, rmb_state *st, uint32_t id, rad_status *rs)
 	uint32_t n, run = rad_link_child(h, rad_link_at(h, id), &n);
 	if (n > 0) {
 		uint32_t kept = 0;
-		uint8_t keep[16];
+		uint8_t keep[WAVE_KIDS];
 		double f = 0, lo = INFINITY, hi = -INFINITY, sum_sp = 0;
 		for (uint32_t k = 0; k < n; k++) {
 			keep[k] = (uint8_t)post(sv, st, run + k, rs);

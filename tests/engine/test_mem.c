@@ -959,6 +959,54 @@ static void test_cluster_light_by_kind(void **state)
 }
 
 /*
+ * The cluster tree's leaves are full (hier.c, split_at): over n polygons
+ * there are ceil(n / RAD_CLUSTER_LEAF_MAX) of them, and the only one
+ * that holds fewer is the last of the order.  Halving the count instead
+ * left 384 polygons (the grid room of side 8) in 128 leaves of 3.
+ */
+static void test_cluster_leaves_full(void **state)
+{
+	(void)state;
+	static const int sides[] = {1, 5, 8, 11};
+	for (size_t t = 0; t < sizeof(sides) / sizeof(sides[0]); t++) {
+		rad_scene *s = grid_room(sides[t]);
+		rad_mem mem;
+		rad_hier h;
+		rmb_hier(s, &mem, &h);
+		uint32_t stack[64], n = 0, leaves = 0, partial = 0, inner = 0;
+		stack[n++] = 0;
+		while (n > 0) {
+			const rad_cluster *c = rad_cluster_at(&h, stack[--n]);
+			if (c->child != RAD_NONE) {
+				inner++;
+				assert_true(n + 2 <= 64);
+				stack[n++] = c->child;
+				stack[n++] = c->child + 1;
+				continue;
+			}
+			leaves++;
+			assert_true(c->count >= 1 &&
+			            c->count <= RAD_CLUSTER_LEAF_MAX);
+			if (c->count < RAD_CLUSTER_LEAF_MAX) {
+				partial++;
+				assert_int_equal(c->first + c->count,
+				                 s->npolys);
+			}
+		}
+		uint32_t want = (s->npolys + RAD_CLUSTER_LEAF_MAX - 1) /
+		                RAD_CLUSTER_LEAF_MAX;
+		assert_int_equal(leaves, want);
+		assert_int_equal(inner, leaves - 1);
+		assert_int_equal(partial,
+		                 s->npolys % RAD_CLUSTER_LEAF_MAX != 0);
+		char msg[200];
+		assert_int_equal(rad_hier_check(&h, msg, sizeof(msg)), 0);
+		rad_hier_destroy(&h);
+		rad_scene_free(s);
+	}
+}
+
+/*
  * Where the elements sit (rad_census): a parallelogram split to a full
  * 4 x 4 with one more corner split is complete to depth 2 (25 elements);
  * a pure emitter split once and then in one quarter, to depth 1 (9), its
@@ -1231,6 +1279,7 @@ int main(void)
 	        cmocka_unit_test(test_budget_restart),
 	        cmocka_unit_test(test_wave_lists),
 	        cmocka_unit_test(test_cluster_light_by_kind),
+	        cmocka_unit_test(test_cluster_leaves_full),
 	        cmocka_unit_test(test_census),
 	        cmocka_unit_test(test_compact_bvh_same_results),
 	};

@@ -129,16 +129,16 @@ static void hold_room(const char *scene, const char *points,
 static void test_graz_office(void **state)
 {
 	(void)state;
-	static const level lv[] = {{RAD_SOLVER_HR, 0.031, 0.15},
-	                           {RAD_SOLVER_RMB, 0.098, 0.59}};
+	static const level lv[] = {{RAD_SOLVER_HR, 0.031, 0.20},
+	                           {RAD_SOLVER_RMB, 0.069, 0.29}};
 	hold_room("graz.gltf", "graz.points", lv, 2);
 }
 
 static void test_hospital_room(void **state)
 {
 	(void)state;
-	static const level lv[] = {{RAD_SOLVER_HR, 0.066, 0.21},
-	                           {RAD_SOLVER_RMB, 0.143, 0.43}};
+	static const level lv[] = {{RAD_SOLVER_HR, 0.057, 0.16},
+	                           {RAD_SOLVER_RMB, 0.143, 0.42}};
 	hold_room("hospital.gltf", "hospital.points", lv, 2);
 }
 
