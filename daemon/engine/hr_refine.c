@@ -140,6 +140,7 @@ static int room_to_split(rad_solver *sv, hr_state *st, uint32_t r, uint32_t s,
 		if (wave_room_split(sv, w, r, s, rcv_only))
 			return 1;
 		w->at_budget = 1;
+		rad_solver_budget_reached(sv);
 	}
 	sv->stats.budget_held++;
 	return 0;

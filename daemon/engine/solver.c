@@ -116,11 +116,15 @@ double rad_seconds(void)
  * same memory better.  So where the budget is reached in one of the
  * first ops->restart_steps steps, the solve starts over at twice eps
  * (its hierarchy and links freed, the scene kept) and runs again to the
- * step it was at, at most RESTARTS_MAX times (eps x 64).  A budget
- * reached later holds pairs where they are, as before: the links still
- * to refine then carry reflected light (the Graz office reaches a budget
- * of half its peak in its fifth step, and holding pairs costs it 1.15x).  The
- * steps run again belong to the iteration that restarted: its time
+ * step it was at, at most RESTARTS_MAX times (eps x 64).  The attempt
+ * stops as soon as its budget is reached (rad_solver_budget_reached
+ * raises sv->abandon, which the cancel paths see) instead of running its
+ * step to the end, all of which would be thrown away: the same solve,
+ * in 0.77-0.95x the time on three scenes (README).  A budget reached
+ * later holds pairs where they are, as before: the links still to
+ * refine then carry reflected light (the Graz office reaches a budget
+ * of half its peak in its fifth step, and holding pairs costs it
+ * 1.15x).  The steps run again belong to the iteration that restarted: its time
  * includes them, and a cancel among them leaves the rest to the next
  * call (sv->redo) with the iteration count unchanged.  The budget's
  * judgement does not depend on the threads, nor do the restarts.
@@ -139,11 +143,24 @@ static void clear_step_counts(rad_stats *s)
 	memset(s->energy_hist, 0, sizeof(s->energy_hist));
 }
 
+/* 1 if a budget reached in step `step` of the solve (0: its first)
+ * starts it over. */
+static int restarts_at(const rad_solver *sv, uint32_t step)
+{
+	return sv->mem.budget && step < sv->ops->restart_steps &&
+	       sv->stats.budget_restarts < RESTARTS_MAX;
+}
+
+/* After step sv->done - 1 has run to its end. */
 static int must_restart(const rad_solver *sv)
 {
-	return sv->mem.budget && sv->stats.budget_reached &&
-	       sv->done <= sv->ops->restart_steps &&
-	       sv->stats.budget_restarts < RESTARTS_MAX;
+	return sv->stats.budget_reached && restarts_at(sv, sv->done - 1);
+}
+
+void rad_solver_budget_reached(rad_solver *sv)
+{
+	if (restarts_at(sv, sv->done))
+		__atomic_store_n(&sv->abandon, 1, __ATOMIC_RELAXED);
 }
 
 /* Start the solve over at twice eps, `steps` steps to run again.  On
@@ -194,6 +211,14 @@ static rad_status iteration_steps(rad_solver *sv, rad_error *err)
 		sv->redo = 1;
 	while (!st && sv->redo) {
 		st = one_step(sv, it, err);
+		if (rad_solver_abandoned(sv)) {
+			/* Stopped where the budget was reached (or ended
+			 * anyway): start over, as must_restart would. */
+			__atomic_store_n(&sv->abandon, 0, __ATOMIC_RELAXED);
+			if (!st || st == RAD_ERR_CANCELLED)
+				st = restart(sv, it + 1, err);
+			continue;
+		}
 		if (!st)
 			sv->redo--;
 		if (!st && must_restart(sv))

@@ -38,6 +38,8 @@ struct rad_solver {
 	double prev_residual; /* residual of the previous step, 0 before */
 	uint32_t done;        /* steps of the solve since its last start */
 	uint32_t redo;        /* steps a restart has still to run again */
+	int abandon; /* the step now running will be run again at twice eps:
+	                stop it (solver.c, Budget restarts); atomic */
 };
 
 extern const rad_solver_ops rad_solver_matrix_ops;
@@ -53,9 +55,27 @@ extern const rad_solver_ops rad_solver_rmb_ops;
  */
 static inline int rad_solver_cancelled(const rad_solver *sv)
 {
-	return sv->opt.cancel &&
-	       __atomic_load_n(sv->opt.cancel, __ATOMIC_RELAXED) != 0;
+	return (sv->opt.cancel &&
+	        __atomic_load_n(sv->opt.cancel, __ATOMIC_RELAXED) != 0) ||
+	       __atomic_load_n(&sv->abandon, __ATOMIC_RELAXED) != 0;
 }
+
+/* 1 if the step now running is to stop because the solve will start
+ * over (solver.c, Budget restarts): seen by rad_solver_cancelled too,
+ * so the cancel paths stop it; here for the waves, which go on after a
+ * cancel unless deferrable. */
+static inline int rad_solver_abandoned(const rad_solver *sv)
+{
+	return __atomic_load_n(&sv->abandon, __ATOMIC_RELAXED) != 0;
+}
+
+/*
+ * The memory budget has just been reached in the step now running (its
+ * first time in this step).  Where that sends the solve back to its start
+ * (solver.c, Budget restarts), the step is told to stop: what it would
+ * still do is thrown away.
+ */
+void rad_solver_budget_reached(rad_solver *sv);
 
 /* Report progress within an iteration (fraction in [0,1]). */
 static inline void rad_solver_progress(const rad_solver *sv, double f)

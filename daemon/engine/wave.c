@@ -58,6 +58,16 @@ void wave_destroy(rad_solver *sv, rad_wave *w)
 	w->rays = NULL;
 }
 
+/* Add the rays the judges traced to the step's, and zero them. */
+static void count_rays(rad_solver *sv, rad_wave *w)
+{
+	int threads = rad_par_threads(sv->par);
+	for (int t = 0; t < threads; t++) {
+		sv->stats.rays += w->rays[t];
+		w->rays[t] = 0;
+	}
+}
+
 void wave_step_begin(rad_solver *sv, rad_wave *w)
 {
 	int threads = rad_par_threads(sv->par);
@@ -259,8 +269,10 @@ rad_status wave_run(rad_solver *sv, rad_wave *w, const void *items, size_t n,
 	w->judged = 0;
 	for (size_t off = 0; off < n; off += block) {
 		size_t m = n - off < block ? n - off : block;
-		if (!w->at_budget && !wave_room(sv, w, m, n - off - m))
+		if (!w->at_budget && !wave_room(sv, w, m, n - off - m)) {
 			w->at_budget = 1;
+			rad_solver_budget_reached(sv);
+		}
 		judge_job job = {sv, w,
 		                 (const unsigned char *)items +
 		                         off * w->item_size,
@@ -274,6 +286,10 @@ rad_status wave_run(rad_solver *sv, rad_wave *w, const void *items, size_t n,
 			sv->stats.budget_held += w->verdict[i].held;
 		}
 		w->judged = off + m;
+		if (w->judged < n && rad_solver_abandoned(sv)) {
+			count_rays(sv, w); /* what the attempt cost */
+			return RAD_ERR_CANCELLED;
+		}
 		if (w->defer && w->judged < n && rad_solver_cancelled(sv))
 			return RAD_OK;
 	}
@@ -461,12 +477,10 @@ rad_status wave_failed(const rad_solver *sv, rad_status rs, rad_error *err)
 	                rad_pool_live(&sv->h.links));
 }
 
-rad_status wave_step_end(rad_solver *sv, const rad_wave *w, rad_error *err)
+rad_status wave_step_end(rad_solver *sv, rad_wave *w, rad_error *err)
 {
-	int threads = rad_par_threads(sv->par);
 	sv->stats.budget_reached = w->at_budget;
-	for (int t = 0; t < threads; t++)
-		sv->stats.rays += w->rays[t];
+	count_rays(sv, w);
 	rad_solver_progress(sv, 1.0);
 	if (w->force_store)
 		return rad_fail(err, RAD_ERR_CANCELLED,

@@ -175,6 +175,6 @@ rad_status wave_failed(const rad_solver *sv, rad_status rs, rad_error *err);
  * End of a step: add the threads' ray counts to the stats, report full
  * progress, and RAD_ERR_CANCELLED when refinement was cut short.
  */
-rad_status wave_step_end(rad_solver *sv, const rad_wave *w, rad_error *err);
+rad_status wave_step_end(rad_solver *sv, rad_wave *w, rad_error *err);
 
 #endif
