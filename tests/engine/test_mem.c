@@ -744,7 +744,8 @@ static void test_budget_holds(void **state)
  * reached in its first step, starts over at twice eps until its first
  * two steps fit, within the budget; the solve it ends with is, bit for
  * bit, the one a solver made at that eps gives, on 1 or 2 threads, and
- * its iterations are counted once.  rmb never starts over.
+ * its iterations are counted once: an attempt stopped where its budget
+ * was reached throws away nothing that counts.  rmb never starts over.
  */
 static void test_budget_restart(void **state)
 {
@@ -775,6 +776,9 @@ static void test_budget_restart(void **state)
 		              (double)m.peak_work / 1048576.0, o.memory_budget);
 		assert_int_equal(st.iteration, 3);
 		assert_true(st.budget_restarts >= 1);
+		/* The attempts stopped where their budget was reached, and
+		 * the stop is not left raised (it is not a cancel). */
+		assert_false(rad_solver_cancelled(sv));
 		assert_true(st.eps ==
 		            o.eps * (double)(1u << st.budget_restarts));
 		assert_true(m.peak_work <=
