@@ -247,13 +247,16 @@ int hr_refine_left(const hr_state *st)
  * wave (st->wave.defer) cancelled part way keeps the pairs it did not
  * judge at the front of todo, and the parents not expanded and the pairs
  * held where they are, and returns RAD_ERR_CANCELLED: the next step goes
- * on with them.
+ * on with them.  An attempt the solve will start over from stops at the
+ * next wave (rad_solver_abandoned), whatever it leaves.
  */
 static rad_status refine_waves(rad_solver *sv, hr_state *st)
 {
 	rad_wave *w = &st->wave;
 	repend(sv, st);
 	for (;;) {
+		if (rad_solver_abandoned(sv))
+			return RAD_ERR_CANCELLED; /* all thrown away */
 		if (w->todo.n == 0) {
 			if (w->parents_next == w->parents.n) {
 				if (w->held.n == 0)

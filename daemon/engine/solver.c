@@ -118,15 +118,16 @@ double rad_seconds(void)
  * (its hierarchy and links freed, the scene kept) and runs again to the
  * step it was at, at most RESTARTS_MAX times (eps x 64).  The attempt
  * stops as soon as its budget is reached (rad_solver_budget_reached
- * raises sv->abandon, which the cancel paths see) instead of running its
+ * raises sv->abandon where one_step armed sv->restart_armed, and the
+ * cancel paths see it) instead of running its
  * step to the end, all of which would be thrown away: the same solve,
  * in 0.77-0.95x the time on three scenes (README).  A budget reached
  * later holds pairs where they are, as before: the links still to
  * refine then carry reflected light (the Graz office reaches a budget
  * of half its peak in its fifth step, and holding pairs costs it
- * 1.15x).  The steps run again belong to the iteration that restarted: its time
- * includes them, and a cancel among them leaves the rest to the next
- * call (sv->redo) with the iteration count unchanged.  The budget's
+ * 1.15x).  The steps run again belong to the iteration that restarted:
+ * its time includes them, and a cancel among them leaves the rest to
+ * the next call (sv->redo) with the iteration count unchanged.  The budget's
  * judgement does not depend on the threads, nor do the restarts.
  */
 #define RESTARTS_MAX 6
@@ -155,12 +156,6 @@ static int restarts_at(const rad_solver *sv, uint32_t step)
 static int must_restart(const rad_solver *sv)
 {
 	return sv->stats.budget_reached && restarts_at(sv, sv->done - 1);
-}
-
-void rad_solver_budget_reached(rad_solver *sv)
-{
-	if (restarts_at(sv, sv->done))
-		__atomic_store_n(&sv->abandon, 1, __ATOMIC_RELAXED);
 }
 
 /* Start the solve over at twice eps, `steps` steps to run again.  On
@@ -193,6 +188,7 @@ static rad_status restart(rad_solver *sv, uint32_t steps, rad_error *err)
 static rad_status one_step(rad_solver *sv, uint32_t iteration, rad_error *err)
 {
 	sv->stats.iteration = sv->done;
+	sv->restart_armed = restarts_at(sv, sv->done);
 	rad_status st = sv->ops->step(sv, err);
 	sv->stats.iteration = iteration;
 	if (!st)

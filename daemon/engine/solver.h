@@ -38,6 +38,8 @@ struct rad_solver {
 	double prev_residual; /* residual of the previous step, 0 before */
 	uint32_t done;        /* steps of the solve since its last start */
 	uint32_t redo;        /* steps a restart has still to run again */
+	int restart_armed;    /* a budget reached in the step now running
+	                         starts the solve over (solver.c) */
 	int abandon; /* the step now running will be run again at twice eps:
 	                stop it (solver.c, Budget restarts); atomic */
 };
@@ -72,10 +74,15 @@ static inline int rad_solver_abandoned(const rad_solver *sv)
 /*
  * The memory budget has just been reached in the step now running (its
  * first time in this step).  Where that sends the solve back to its start
- * (solver.c, Budget restarts), the step is told to stop: what it would
- * still do is thrown away.
+ * (solver.c, Budget restarts: one_step says so in sv->restart_armed), the
+ * step is told to stop: what it would still do is thrown away.  Inline,
+ * so that the waves below solver.c do not call up into it.
  */
-void rad_solver_budget_reached(rad_solver *sv);
+static inline void rad_solver_budget_reached(rad_solver *sv)
+{
+	if (sv->restart_armed)
+		__atomic_store_n(&sv->abandon, 1, __ATOMIC_RELAXED);
+}
 
 /* Report progress within an iteration (fraction in [0,1]). */
 static inline void rad_solver_progress(const rad_solver *sv, double f)
