@@ -255,8 +255,10 @@ static rad_status refine_waves(rad_solver *sv, hr_state *st)
 	rad_wave *w = &st->wave;
 	repend(sv, st);
 	for (;;) {
-		if (rad_solver_abandoned(sv))
-			return RAD_ERR_CANCELLED; /* all thrown away */
+		if (rad_solver_abandoned(sv)) {
+			wave_count_rays(sv, w); /* what the attempt cost */
+			return RAD_ERR_CANCELLED;
+		}
 		if (w->todo.n == 0) {
 			if (w->parents_next == w->parents.n) {
 				if (w->held.n == 0)

@@ -119,16 +119,17 @@ double rad_seconds(void)
  * step it was at, at most RESTARTS_MAX times (eps x 64).  The attempt
  * stops as soon as its budget is reached (rad_solver_budget_reached
  * raises sv->abandon where one_step armed sv->restart_armed, and the
- * cancel paths see it) instead of running its
- * step to the end, all of which would be thrown away: the same solve,
- * in 0.77-0.95x the time on three scenes (README).  A budget reached
+ * cancel paths see it) instead of running its step to the end, all of
+ * which would be thrown away: the same solve, in 0.77-0.95x the time
+ * on three scenes (README).  A budget reached
  * later holds pairs where they are, as before: the links still to
  * refine then carry reflected light (the Graz office reaches a budget
  * of half its peak in its fifth step, and holding pairs costs it
  * 1.15x).  The steps run again belong to the iteration that restarted:
  * its time includes them, and a cancel among them leaves the rest to
- * the next call (sv->redo) with the iteration count unchanged.  The budget's
- * judgement does not depend on the threads, nor do the restarts.
+ * the next call (sv->redo) with the iteration count unchanged.  The
+ * budget's judgement does not depend on the threads, nor do the
+ * restarts.
  */
 #define RESTARTS_MAX 6
 
@@ -150,12 +151,6 @@ static int restarts_at(const rad_solver *sv, uint32_t step)
 {
 	return sv->mem.budget && step < sv->ops->restart_steps &&
 	       sv->stats.budget_restarts < RESTARTS_MAX;
-}
-
-/* After step sv->done - 1 has run to its end. */
-static int must_restart(const rad_solver *sv)
-{
-	return sv->stats.budget_reached && restarts_at(sv, sv->done - 1);
 }
 
 /* Start the solve over at twice eps, `steps` steps to run again.  On
@@ -208,8 +203,8 @@ static rad_status iteration_steps(rad_solver *sv, rad_error *err)
 	while (!st && sv->redo) {
 		st = one_step(sv, it, err);
 		if (rad_solver_abandoned(sv)) {
-			/* Stopped where the budget was reached (or ended
-			 * anyway): start over, as must_restart would. */
+			/* The budget was reached in an armed step (one_step):
+			 * stopped there, or ended anyway; start over. */
 			__atomic_store_n(&sv->abandon, 0, __ATOMIC_RELAXED);
 			if (!st || st == RAD_ERR_CANCELLED)
 				st = restart(sv, it + 1, err);
@@ -217,8 +212,6 @@ static rad_status iteration_steps(rad_solver *sv, rad_error *err)
 		}
 		if (!st)
 			sv->redo--;
-		if (!st && must_restart(sv))
-			st = restart(sv, it + 1, err);
 	}
 	return st;
 }

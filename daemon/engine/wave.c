@@ -58,8 +58,7 @@ void wave_destroy(rad_solver *sv, rad_wave *w)
 	w->rays = NULL;
 }
 
-/* Add the rays the judges traced to the step's, and zero them. */
-static void count_rays(rad_solver *sv, rad_wave *w)
+void wave_count_rays(rad_solver *sv, rad_wave *w)
 {
 	int threads = rad_par_threads(sv->par);
 	for (int t = 0; t < threads; t++) {
@@ -287,7 +286,7 @@ rad_status wave_run(rad_solver *sv, rad_wave *w, const void *items, size_t n,
 		}
 		w->judged = off + m;
 		if (w->judged < n && rad_solver_abandoned(sv)) {
-			count_rays(sv, w); /* what the attempt cost */
+			wave_count_rays(sv, w); /* what the attempt cost */
 			return RAD_ERR_CANCELLED;
 		}
 		if (w->defer && w->judged < n && rad_solver_cancelled(sv))
@@ -480,7 +479,7 @@ rad_status wave_failed(const rad_solver *sv, rad_status rs, rad_error *err)
 rad_status wave_step_end(rad_solver *sv, rad_wave *w, rad_error *err)
 {
 	sv->stats.budget_reached = w->at_budget;
-	count_rays(sv, w);
+	wave_count_rays(sv, w);
 	rad_solver_progress(sv, 1.0);
 	if (w->force_store)
 		return rad_fail(err, RAD_ERR_CANCELLED,

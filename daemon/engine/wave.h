@@ -169,6 +169,11 @@ void wave_pend_split(const rad_hier *h, rad_wave *w, uint32_t r, uint32_t s,
 int wave_room_split(const rad_solver *sv, const rad_wave *w, uint32_t r,
                     uint32_t s, int rcv_only);
 
+/* Add the rays the judges traced to the step's, and zero them: at the
+ * step's end (wave_step_end), or where an attempt the solve starts over
+ * from stops (solver.c, Budget restarts). */
+void wave_count_rays(rad_solver *sv, rad_wave *w);
+
 /* A refinement's failure (out of memory), reported with the pool sizes. */
 rad_status wave_failed(const rad_solver *sv, rad_status rs, rad_error *err);
 /*
