@@ -420,8 +420,9 @@ void rad_hier_pull(rad_hier *h);
  * child its share by orientation, DESIGN) and the quadtrees, and call
  * leaf() on every surface leaf with its total irradiance in e->I.
  * A solver may push a payload of RAD_PUSH_EXTRA floats per node with it
- * (extra: the node's own, or NULL for none), shared out and summed as I
- * is; the leaf gets the total (NULL when extra is NULL).
+ * (extra: the node's own, or NULL for none; read before the next call,
+ * which may reuse it), shared out and summed as I is; the leaf gets the
+ * total (NULL when extra is NULL).  The push runs on the calling thread.
  */
 #define RAD_PUSH_EXTRA 4
 typedef const float *(*rad_push_extra)(const rad_hier *h, uint32_t tagged,

@@ -30,6 +30,8 @@ typedef struct hr_state {
 	size_t vals_cap;
 } hr_state;
 
+/* Children pairs listed at a time by the waves (hr_refine.c). */
+#define HR_BATCH_PAIRS (1u << 15)
 /* The first step's links (hr_refine.c): the root cluster's self-link and
  * the lights', refined; without clustering, every pair of polygons. */
 rad_status hr_initial_links(rad_solver *sv, hr_state *st);

@@ -171,7 +171,6 @@ static rad_status apply(rad_solver *sv, const void *item, const wave_verdict *v)
  * same order, so the links and elements are the same as with the whole
  * round listed at once.
  */
-#define HR_BATCH_PAIRS (1u << 15)
 
 /* Count in w the pairs of l from the from-th on as pending (wave.h). */
 static void pend_list(const rad_hier *h, rad_wave *w, const wave_list *l,

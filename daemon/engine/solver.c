@@ -86,8 +86,9 @@ rad_status rad_solver_new(const rad_scene *scene, const rad_options *opt,
 	if (st == RAD_ERR_NOMEM && atomic_load(&sv->mem.budget_refusals))
 		rad_fail(err, st,
 		         "%s: the memory budget (%g MiB) is smaller than this "
-		         "scene's element and cluster hierarchy (%u polygons: "
-		         "%.1f MiB for their root elements alone)",
+		         "scene's element and cluster hierarchy and the room "
+		         "its first step starts with (%u polygons: %.1f MiB "
+		         "for their root elements alone)",
 		         sv->ops->name, opt->memory_budget, scene->npolys,
 		         (double)scene->npolys * sizeof(rad_elem) / 1048576.0);
 	if (st) {

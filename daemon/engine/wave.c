@@ -372,6 +372,10 @@ static int room_with(const rad_solver *sv, const rad_wave *w, size_t n,
 	 * pairs applied already take w->pending (and pending_kids items). */
 	size_t item = w->item_size;
 	size_t kids = n * WAVE_KIDS + w->pending_kids + more_kids;
+	/* Where they are listed a batch at a time (hr), todo holds at most
+	 * w->todo_max of them at once. */
+	if (w->todo_max && w->todo.n + kids > w->todo_max)
+		kids = w->todo_max > w->todo.n ? w->todo_max - w->todo.n : 0;
 	size_t bytes =
 	        list_growth(sv, &w->todo, kids, item) +
 	        list_growth(sv, &w->held, n, item) +
@@ -410,7 +414,16 @@ int wave_room_for(const rad_solver *sv, const rad_wave *w, size_t bytes)
 	size_t blocks = ((size_t)h->elems.rec_size << h->elems.shift) +
 	                ((size_t)h->links.rec_size << h->links.shift) +
 	                ((size_t)third->rec_size << third->shift);
-	return rad_mem_room(&sv->mem, blocks + w->reserve + bytes);
+	size_t reserve = w->reserve ? w->reserve(sv) : 0;
+	return rad_mem_room(&sv->mem, blocks + reserve + bytes);
+}
+
+rad_status wave_refuse(rad_solver *sv, rad_error *err)
+{
+	atomic_fetch_add(&sv->mem.budget_refusals, 1);
+	return rad_fail(err, RAD_ERR_NOMEM,
+	                "%s: no room for a step in the memory budget",
+	                sv->ops->name);
 }
 
 /* Children of node t a split makes, and whether an element is split. */

@@ -39,20 +39,25 @@ typedef struct rad_wave {
 	size_t parents_next;   /* the first of them not expanded yet */
 	wave_verdict *verdict; /* one per item of the wave run, SCRATCH */
 	size_t verdict_cap;
-	uint64_t *rays;      /* per-thread ray counters, SCRATCH */
-	uint32_t item_size;  /* bytes per item */
-	int force_store;     /* cancelled: pairs stay at the level reached */
-	int at_budget;       /* the memory budget is reached: pairs stay at
-	                        their level (wave_room) */
-	size_t reserve;      /* bytes the solver needs after its refinement
-	                        (its gather), set before each step */
+	uint64_t *rays;     /* per-thread ray counters, SCRATCH */
+	uint32_t item_size; /* bytes per item */
+	int force_store;    /* cancelled: pairs stay at the level reached */
+	int at_budget;      /* the memory budget is reached: pairs stay at
+	                       their level (wave_room) */
+	/* Bytes the solver will still allocate besides its pools and the
+	 * wave's lists, for the elements there are now (scratch its walk
+	 * or gather grows): set by the solver, asked at each look at the
+	 * budget. */
+	size_t (*reserve)(const rad_solver *sv);
 	size_t pending;      /* bytes the items applied so far will still
 	                        take (hr: children of the pairs held) */
 	size_t pending_kids; /* and the children pairs they will list */
+	size_t todo_max;     /* hr: todo never holds more (its children are
+	                        listed a batch at a time); 0: no bound */
 	size_t link_cost;    /* bytes a pair at its level takes: hr a link;
 	                        rmb nothing, its records being optional */
-	size_t elem_extra;   /* the solver's scratch per element made (the
-	                        part of w->reserve that grows with them) */
+	size_t elem_extra;   /* the solver's scratch per element made (what
+	                        w->reserve asks for each one a split makes) */
 	int defer;     /* set by the caller: a cancel within a wave stops it
 	                  after the block under way (WAVE_DEFER_BLOCK), the
 	                  items not judged left for the caller to keep */
@@ -155,9 +160,13 @@ int wave_room(const rad_solver *sv, const rad_wave *w, size_t n, size_t rest);
  * still fit (wave_room_for): the work list of a depth-first walk stays
  * within the budget however deep the walk goes.  n without a budget. */
 size_t wave_top_fit(const rad_solver *sv, const rad_wave *w, size_t n);
-/* 1 if `bytes` more still leave a block for each pool and w->reserve
- * free under the solver's memory budget (always 1 without one). */
+/* 1 if `bytes` more still leave a block for each pool and w->reserve's
+ * bytes free under the solver's memory budget (always 1 without one). */
 int wave_room_for(const rad_solver *sv, const rad_wave *w, size_t bytes);
+/* Refuse a solver whose budget has no room for its first step (as
+ * wave_room_for says): counted as the budget's refusal, so that
+ * rad_solver_new names the budget. */
+rad_status wave_refuse(rad_solver *sv, rad_error *err);
 /* Count in w->pending (and pending_kids) what splitting pair r <- s will
  * take at most once its children are made (as wave_children would:
  * element splits, a link for each child); sign -1 takes it off again,
