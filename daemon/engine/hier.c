@@ -325,31 +325,30 @@ static void no_links(uint32_t *heads, uint32_t n)
 		heads[k] = RAD_NONE;
 }
 
-/* Records of a link, and the block shifts of the link pools for elements'
- * blocks of 1 << shift. */
-static uint32_t link_rec(int lists)
+/* The pools, with blocks of about 1 << shift records. */
+static void init_pools(rad_hier *h, rad_mem *mem, uint32_t shift, uint32_t n,
+                       int lists)
 {
-	return lists ? sizeof(rad_hlink) : sizeof(rad_link);
+	rad_pool_init(&h->elems, mem, RAD_MEM_ELEM_SURFACE, sizeof(rad_elem),
+	              shift, n);
+	rad_pool_init(&h->clusters, mem, RAD_MEM_ELEM_CLUSTER,
+	              sizeof(rad_cluster), shift, 0);
+	rad_pool_init(&h->links, mem, RAD_MEM_LINKS,
+	              lists ? sizeof(rad_hlink) : sizeof(rad_link),
+	              shift < 10 ? shift + 2 : 12, 0);
+	/* The same blocks as elems': the same ids for the same adds. */
+	rad_pool_init(&h->heads, mem, RAD_MEM_LINKS, sizeof(uint32_t), shift,
+	              n);
+	rad_pool_init(&h->links_ext, mem, RAD_MEM_LINKS, sizeof(rad_link_ext),
+	              shift < 10 ? shift + 1 : 11, 0);
 }
 
-static uint32_t link_shift(uint32_t shift)
+size_t rad_hier_grow_blocks(const rad_hier *h)
 {
-	return shift < 10 ? shift + 2 : 12;
-}
-
-static uint32_t ext_shift(uint32_t shift)
-{
-	return shift < 10 ? shift + 1 : 11;
-}
-
-/* Bytes of a block of each pool that grows (wave_room_for): elements,
- * links, and hr's list heads or rmb's passive links' records. */
-static size_t block_bytes(uint32_t shift, int lists)
-{
-	size_t third = lists ? sizeof(uint32_t) << shift
-	                     : sizeof(rad_link_ext) << ext_shift(shift);
-	return (sizeof(rad_elem) << shift) +
-	       ((size_t)link_rec(lists) << link_shift(shift)) + third;
+	const rad_pool *third = h->lists ? &h->heads : &h->links_ext;
+	return ((size_t)h->elems.rec_size << h->elems.shift) +
+	       ((size_t)h->links.rec_size << h->links.shift) +
+	       ((size_t)third->rec_size << third->shift);
 }
 
 rad_status rad_hier_init(rad_hier *h, const rad_scene *s, rad_mem *mem,
@@ -368,24 +367,15 @@ rad_status rad_hier_init(rad_hier *h, const rad_scene *s, rad_mem *mem,
 	uint32_t shift = 6;
 	while (shift < 12 && (1u << shift) < n)
 		shift++;
+	h->lists = lists;
+	init_pools(h, mem, shift, n, lists);
 	/* Under a memory budget a block of each pool that grows is kept free
 	 * (wave_room_for): together they take at most a 64th of it (a
-	 * 2 MiB budget lost 288 KiB to blocks of 4096). */
+	 * 2 MiB budget lost 288 KiB to blocks of 4096).  The pools hold
+	 * nothing yet: made again, they cost nothing. */
 	while (mem->budget && shift > 6 &&
-	       block_bytes(shift, lists) > (size_t)mem->budget / 64)
-		shift--;
-	rad_pool_init(&h->elems, mem, RAD_MEM_ELEM_SURFACE, sizeof(rad_elem),
-	              shift, n);
-	rad_pool_init(&h->clusters, mem, RAD_MEM_ELEM_CLUSTER,
-	              sizeof(rad_cluster), shift, 0);
-	h->lists = lists;
-	rad_pool_init(&h->links, mem, RAD_MEM_LINKS, link_rec(lists),
-	              link_shift(shift), 0);
-	/* The same blocks as elems': the same ids for the same adds. */
-	rad_pool_init(&h->heads, mem, RAD_MEM_LINKS, sizeof(uint32_t), shift,
-	              n);
-	rad_pool_init(&h->links_ext, mem, RAD_MEM_LINKS, sizeof(rad_link_ext),
-	              ext_shift(shift), 0);
+	       rad_hier_grow_blocks(h) > (size_t)mem->budget / 64)
+		init_pools(h, mem, --shift, n, lists);
 	if (n == 0)
 		return rad_fail(err, RAD_ERR_INVALID, "scene has no polygons");
 	h->order =

@@ -346,6 +346,10 @@ double rad_hier_cover_dist(const rad_hier *h, uint32_t poly);
  * 0 for the others' (rad_link).  On failure everything allocated is
  * released.
  */
+/* Bytes of a block of each pool that grows: elements, links, and hr's
+ * list heads or rmb's passive links' records (a budget keeps them free:
+ * wave_room_for). */
+size_t rad_hier_grow_blocks(const rad_hier *h);
 rad_status rad_hier_init(rad_hier *h, const rad_scene *s, rad_mem *mem,
                          double min_edge, int lists, rad_error *err);
 void rad_hier_destroy(rad_hier *h);

@@ -371,9 +371,7 @@ static rad_status hr_init(rad_solver *sv, rad_error *err)
 	sv->impl = st;
 	/* As rmb_init: a budget the first step cannot start in is refused. */
 	st->wave.reserve = gather_reserve;
-	if (!wave_room_for(sv, &st->wave, 0))
-		return wave_refuse(sv, err);
-	return RAD_OK;
+	return wave_start_room(sv, &st->wave, err);
 }
 
 static void release_scratch(rad_solver *sv, hr_state *st)

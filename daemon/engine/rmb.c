@@ -259,8 +259,9 @@ static rad_status rmb_init(rad_solver *sv, rad_error *err)
 	 * fit in is refused with the hierarchy's (rad_solver_new), not by
 	 * that step. */
 	st->wave.reserve = step_reserve;
-	if (!wave_room_for(sv, &st->wave, 0))
-		return wave_refuse(sv, err);
+	rs = wave_start_room(sv, &st->wave, err);
+	if (rs)
+		return rs;
 	rmb_mark_black(sv, 0);
 	/* B = E everywhere, then the initial pull: dB = B on every node. */
 	rad_hier_reset_emission(&sv->h);

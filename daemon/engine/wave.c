@@ -407,19 +407,15 @@ int wave_room_for(const rad_solver *sv, const rad_wave *w, size_t bytes)
 {
 	if (!sv->mem.budget)
 		return 1;
-	const rad_hier *h = &sv->h;
-	/* A block of each pool that grows: elements, links, and hr's list
-	 * heads or rmb's passive links' records. */
-	const rad_pool *third = h->lists ? &h->heads : &h->links_ext;
-	size_t blocks = ((size_t)h->elems.rec_size << h->elems.shift) +
-	                ((size_t)h->links.rec_size << h->links.shift) +
-	                ((size_t)third->rec_size << third->shift);
 	size_t reserve = w->reserve ? w->reserve(sv) : 0;
-	return rad_mem_room(&sv->mem, blocks + reserve + bytes);
+	return rad_mem_room(&sv->mem,
+	                    rad_hier_grow_blocks(&sv->h) + reserve + bytes);
 }
 
-rad_status wave_refuse(rad_solver *sv, rad_error *err)
+rad_status wave_start_room(rad_solver *sv, const rad_wave *w, rad_error *err)
 {
+	if (wave_room_for(sv, w, 0))
+		return RAD_OK;
 	atomic_fetch_add(&sv->mem.budget_refusals, 1);
 	return rad_fail(err, RAD_ERR_NOMEM,
 	                "%s: no room for a step in the memory budget",

@@ -163,10 +163,10 @@ size_t wave_top_fit(const rad_solver *sv, const rad_wave *w, size_t n);
 /* 1 if `bytes` more still leave a block for each pool and w->reserve's
  * bytes free under the solver's memory budget (always 1 without one). */
 int wave_room_for(const rad_solver *sv, const rad_wave *w, size_t bytes);
-/* Refuse a solver whose budget has no room for its first step (as
- * wave_room_for says): counted as the budget's refusal, so that
- * rad_solver_new names the budget. */
-rad_status wave_refuse(rad_solver *sv, rad_error *err);
+/* RAD_OK if the budget has room for a first step (as wave_room_for
+ * says, w->reserve set); else refuse the solver, counted as the budget's
+ * refusal so that rad_solver_new names the budget. */
+rad_status wave_start_room(rad_solver *sv, const rad_wave *w, rad_error *err);
 /* Count in w->pending (and pending_kids) what splitting pair r <- s will
  * take at most once its children are made (as wave_children would:
  * element splits, a link for each child); sign -1 takes it off again,
