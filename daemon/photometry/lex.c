@@ -89,9 +89,12 @@ static int separator(char c)
 
 pho_status pho_token(pho_lex *lx, const char *what, double *v)
 {
-	while (lx->p < lx->end && (separator(*lx->p) || line_end(lx)))
-		if (separator(*lx->p))
+	for (;;) { /* separators and line ends; line_end may reach end */
+		if (lx->p < lx->end && separator(*lx->p))
 			lx->p++;
+		else if (!line_end(lx))
+			break;
+	}
 	if (lx->p >= lx->end)
 		return pho_fail(lx, PHO_ERR_INVALID,
 		                "the file ends before the %s", what);
