@@ -26,6 +26,7 @@ void rad_mem_init(rad_mem *m)
 	atomic_init(&m->peak, 0);
 	atomic_init(&m->work, 0);
 	atomic_init(&m->peak_work, 0);
+	atomic_init(&m->charged, 0);
 	m->base = NULL;
 	atomic_init(&m->peak_joint, 0);
 	atomic_init(&m->peak_work_joint, 0);
@@ -38,19 +39,40 @@ void rad_mem_set_budget(rad_mem *m, int64_t bytes)
 	m->budget = bytes > 0 ? bytes : 0;
 }
 
-/* The most malloc_usable_size can give for a request of size (glibc: 16-
- * byte steps, or whole pages once it maps the block). */
+/*
+ * The most malloc_usable_size can give for a request of size, prefix
+ * included (glibc, 64-bit).  In the heap a chunk is the request plus 8
+ * rounded up to 16 (at least 32), of which 8 are the allocator's, and
+ * the chunk taken may be 16 bytes longer when the rest would be too
+ * small to keep.  From 128 KiB (the least mmap threshold; it rises by
+ * itself up to 32 MiB) a block may be mapped instead: whole pages, less
+ * 16 bytes.
+ */
 static size_t usable_bound(size_t size)
 {
-	if (size >= 128 * 1024)
-		return (size + 4095) / 4096 * 4096;
-	return size + 24;
+	size_t chunk = (size + 8 + 15) & ~(size_t)15;
+	size_t heap = (chunk < 32 ? 32 : chunk) + 8;
+	if (size < 128 * 1024)
+		return heap;
+	size_t mapped = (size + 32 + 4095) & ~(size_t)4095;
+	return mapped > heap ? mapped : heap;
 }
 
 int rad_mem_room(const rad_mem *m, size_t bytes)
 {
 	return m->budget <= 0 ||
-	       atomic_load(&m->work) + (int64_t)bytes <= m->budget;
+	       atomic_load(&m->charged) + (int64_t)bytes <= m->budget;
+}
+
+size_t rad_mem_usable(const void *p)
+{
+	return malloc_usable_size((unsigned char *)p - RAD_MEM_PREFIX);
+}
+
+/* The block p's prefix: the size asked for, prefix included. */
+static size_t *prefix(void *p)
+{
+	return (size_t *)(void *)((unsigned char *)p - RAD_MEM_PREFIX);
 }
 
 void rad_mem_report_clear(rad_mem_report *r)
@@ -158,7 +180,8 @@ static void raise_to(_Atomic int64_t *peak, int64_t t)
 		;
 }
 
-void rad_mem_count(rad_mem *m, rad_mem_kind kind, int64_t delta)
+/* Count delta bytes held, of which charge is charged (delta's bound). */
+static void count(rad_mem *m, rad_mem_kind kind, int64_t delta, int64_t charge)
 {
 	atomic_fetch_add_explicit(&process_bytes, delta, memory_order_relaxed);
 	if (shared_g) {
@@ -172,10 +195,16 @@ void rad_mem_count(rad_mem *m, rad_mem_kind kind, int64_t delta)
 		raise_to(&m->peak_joint, t + atomic_load(&m->base->total));
 	if (kind == RAD_MEM_STUDY)
 		return;
+	atomic_fetch_add(&m->charged, charge);
 	t = atomic_fetch_add(&m->work, delta) + delta;
 	raise_to(&m->peak_work, t);
 	if (m->base)
 		raise_to(&m->peak_work_joint, t + atomic_load(&m->base->work));
+}
+
+void rad_mem_count(rad_mem *m, rad_mem_kind kind, int64_t delta)
+{
+	count(m, kind, delta, delta);
 }
 
 static _Atomic int64_t fail_countdown = -1; /* < 0: injection off */
@@ -203,51 +232,69 @@ static int must_fail(rad_mem *m, rad_mem_kind kind, size_t size, size_t grow)
 	return 0;
 }
 
+/* Block b of malloc's for a request of size (prefix included): its
+ * prefix written and counted; what the caller gets. */
+static void *take(rad_mem *m, rad_mem_kind kind, void *b, size_t size)
+{
+	*(size_t *)b = size;
+	count(m, kind, (int64_t)malloc_usable_size(b),
+	      (int64_t)usable_bound(size));
+	return (unsigned char *)b + RAD_MEM_PREFIX;
+}
+
 void *rad_mem_alloc(rad_mem *m, rad_mem_kind kind, size_t size)
 {
+	if (size > SIZE_MAX - RAD_MEM_PREFIX)
+		return NULL;
+	size += RAD_MEM_PREFIX;
 	if (must_fail(m, kind, size, usable_bound(size)))
 		return NULL;
-	void *p = malloc(size ? size : 1);
-	if (p)
-		rad_mem_count(m, kind, (int64_t)malloc_usable_size(p));
-	return p;
+	void *b = malloc(size);
+	return b ? take(m, kind, b, size) : NULL;
 }
 
 void *rad_mem_calloc(rad_mem *m, rad_mem_kind kind, size_t n, size_t size)
 {
-	if (size && n > SIZE_MAX / size)
+	if (size && n > (SIZE_MAX - RAD_MEM_PREFIX) / size)
 		return NULL;
-	if (must_fail(m, kind, n * size, usable_bound(n * size)))
+	size_t all = n * size + RAD_MEM_PREFIX;
+	if (must_fail(m, kind, all, usable_bound(all)))
 		return NULL;
-	void *p = calloc(n ? n : 1, size ? size : 1);
-	if (p)
-		rad_mem_count(m, kind, (int64_t)malloc_usable_size(p));
-	return p;
+	void *b = calloc(1, all);
+	return b ? take(m, kind, b, all) : NULL;
 }
 
 void *rad_mem_realloc(rad_mem *m, rad_mem_kind kind, void *p, size_t size)
 {
 	if (!p)
 		return rad_mem_alloc(m, kind, size);
-	int64_t before = (int64_t)malloc_usable_size(p);
-	size_t most = usable_bound(size);
+	if (size > SIZE_MAX - RAD_MEM_PREFIX)
+		return NULL;
+	size += RAD_MEM_PREFIX;
+	void *b = prefix(p);
+	int64_t before = (int64_t)malloc_usable_size(b);
+	int64_t charged = (int64_t)usable_bound(*(size_t *)b);
+	int64_t most = (int64_t)usable_bound(size);
 	if (must_fail(m, kind,
 	              size > (size_t)before ? size - (size_t)before : 0,
-	              most > (size_t)before ? most - (size_t)before : 0))
+	              most > charged ? (size_t)(most - charged) : 0))
 		return NULL;
-	void *q = realloc(p, size ? size : 1);
+	void *q = realloc(b, size);
 	if (!q)
 		return NULL;
-	rad_mem_count(m, kind, (int64_t)malloc_usable_size(q) - before);
-	return q;
+	*(size_t *)q = size;
+	count(m, kind, (int64_t)malloc_usable_size(q) - before, most - charged);
+	return (unsigned char *)q + RAD_MEM_PREFIX;
 }
 
 void rad_mem_free(rad_mem *m, rad_mem_kind kind, void *p)
 {
 	if (!p)
 		return;
-	rad_mem_count(m, kind, -(int64_t)malloc_usable_size(p));
-	free(p);
+	void *b = prefix(p);
+	count(m, kind, -(int64_t)malloc_usable_size(b),
+	      -(int64_t)usable_bound(*(size_t *)b));
+	free(b);
 }
 
 void *rad_mem_grow(rad_mem *m, rad_mem_kind kind, void *p, size_t *cap,

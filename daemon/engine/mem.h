@@ -8,6 +8,18 @@
  * the report adds up to the allocator's own figures, and reads zero once
  * the owner has freed everything.
  *
+ * Every block starts with RAD_MEM_PREFIX bytes that keep the size asked
+ * for (as Redis's zmalloc does where the allocator cannot say): a budget
+ * must judge a count that does not depend on where in the heap a block
+ * lands.  glibc hands out 16 bytes more than a request when the chunk it
+ * splits would leave too little to keep, so what it holds for the same
+ * requests varies by a few bytes from run to run, and a solver's choice
+ * at a budget's edge (where to stop refining, when to restart) with it.
+ * So beside what is held, each set counts what is charged: for each block
+ * the most glibc can hold for its request (usable_bound), which the prefix
+ * gives back at free.  Budgets judge the charge (rad_mem_room), reports
+ * show what is held, and the charge is never below it.
+ *
  * Counters are atomic: Embree's memory monitor reports from its own
  * threads.  rad_mem_alloc() may be called from several threads on the same
  * counter set.
@@ -33,7 +45,8 @@ typedef struct rad_mem {
 	_Atomic int64_t total;                 /* sum of bytes[] */
 	_Atomic int64_t peak;                  /* high-water mark of total */
 	_Atomic int64_t work;                  /* total minus RAD_MEM_STUDY */
-	_Atomic int64_t peak_work;             /* its high-water mark */
+	_Atomic int64_t charged;   /* work as its requests bound it (DESIGN) */
+	_Atomic int64_t peak_work; /* its high-water mark */
 	/* What this set is used with (a solver's scene), or NULL: the
 	 * high-water marks of total and work plus the base's at the time. */
 	const struct rad_mem *base;
@@ -71,8 +84,15 @@ void rad_mem_report_clear(rad_mem_report *r);
  */
 void rad_mem_set_budget(rad_mem *m, int64_t bytes);
 /* 1 if blocks of `bytes` in all (their allocator overhead included) fit
- * in m's budget now; always 1 without a budget. */
+ * in m's budget now, judged on what m is charged; always 1 without a
+ * budget. */
 int rad_mem_room(const rad_mem *m, size_t bytes);
+
+/* Bytes before each block's start (its request size). */
+#define RAD_MEM_PREFIX 16
+/* What the C library holds for block p of rad_mem_alloc and friends (the
+ * figure every count uses; the prefix included). */
+size_t rad_mem_usable(const void *p);
 
 /* 1 if allocating size more bytes would pass the process-wide limit
  * (rad_mem_set_limit); counts the refusal. */

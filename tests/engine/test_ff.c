@@ -18,7 +18,6 @@
 #include <string.h>
 
 #include <cmocka.h>
-#include <malloc.h>
 
 #include "ff.h"
 #include "scene.h"
@@ -1047,12 +1046,12 @@ static void test_scene_states_and_light_validation(void **state)
 
 static int64_t names_bytes(const rad_scene *s)
 {
-	int64_t n = (int64_t)malloc_usable_size(s->nodes);
+	int64_t n = (int64_t)rad_mem_usable(s->nodes);
 	for (uint32_t i = 0; i < s->nnodes; i++)
-		n += s->nodes[i] ? (int64_t)malloc_usable_size(s->nodes[i]) : 0;
+		n += s->nodes[i] ? (int64_t)rad_mem_usable(s->nodes[i]) : 0;
 	for (uint32_t i = 0; i < s->nlights; i++)
 		if (s->lights[i].name)
-			n += (int64_t)malloc_usable_size(s->lights[i].name);
+			n += (int64_t)rad_mem_usable(s->lights[i].name);
 	return n;
 }
 
@@ -1071,12 +1070,9 @@ static void test_scene_memory_is_exact(void **state)
 	assert_true(r.bytes[RAD_MEM_BVH] > 0);
 	assert_int_equal(r.bytes[RAD_MEM_SCRATCH], 0);
 	assert_int_equal(r.bytes[RAD_MEM_GEOMETRY],
-	                 malloc_usable_size(s->polys) +
-	                         malloc_usable_size(s->verts));
-	assert_int_equal(r.bytes[RAD_MEM_MATERIALS],
-	                 malloc_usable_size(s->mats));
-	assert_int_equal(r.bytes[RAD_MEM_LIGHTS],
-	                 malloc_usable_size(s->lights));
+	                 rad_mem_usable(s->polys) + rad_mem_usable(s->verts));
+	assert_int_equal(r.bytes[RAD_MEM_MATERIALS], rad_mem_usable(s->mats));
+	assert_int_equal(r.bytes[RAD_MEM_LIGHTS], rad_mem_usable(s->lights));
 	assert_int_equal(r.bytes[RAD_MEM_NAMES], names_bytes(s));
 	print_message("bvh: %lld bytes for %u polygons\n",
 	              (long long)r.bytes[RAD_MEM_BVH], s->npolys);

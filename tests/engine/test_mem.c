@@ -54,11 +54,24 @@ static void test_counts_match_allocator(void **state)
 #else
 	(void)held;
 #endif
+	/* What a budget judges is never less than what is held, and is
+	 * the same whatever the heap looks like: the sum of each request's
+	 * bound, prefix included. */
+	int64_t charged = atomic_load(&m.charged);
+	assert_true(charged >= r.total);
+	assert_true(charged - r.total <= 64 * 16 + 4096);
+	void *extra = rad_mem_alloc(&m, RAD_MEM_LINKS, 1000);
+	assert_non_null(extra);
+	assert_int_equal(atomic_load(&m.charged) - charged,
+	                 (1000 + RAD_MEM_PREFIX + 8 + 15) / 16 * 16 + 8);
+	assert_int_equal(rad_mem_usable(extra), atomic_load(&m.work) - r.total);
+	rad_mem_free(&m, RAD_MEM_LINKS, extra);
 	for (int i = 0; i < 64; i++)
 		rad_mem_free(&m, RAD_MEM_LINKS, blocks[i]);
 	rad_mem_report_clear(&r);
 	rad_mem_report_add(&m, &r);
 	assert_int_equal(r.total, 0);
+	assert_int_equal(atomic_load(&m.charged), 0);
 	assert_true(r.peak_total >= 100000);
 }
 
