@@ -28,10 +28,14 @@ typedef struct hr_state {
 	int since;         /* steps since it (or since the start) */
 	double *vals;      /* scratch for budget_cut */
 	size_t vals_cap;
+	uint32_t batch; /* children pairs listed at a time (hr_init) */
 } hr_state;
 
-/* Children pairs listed at a time by the waves (hr_refine.c). */
+/* Children pairs listed at a time by the waves (hr_refine.c), at most. */
 #define HR_BATCH_PAIRS (1u << 15)
+/* Under a memory budget, the pairs a batch takes at most a 64th of it
+ * (hr_init), and never fewer than this. */
+#define HR_BATCH_MIN 256u
 /* The first step's links (hr_refine.c): the root cluster's self-link and
  * the lights', refined; without clustering, every pair of polygons. */
 rad_status hr_initial_links(rad_solver *sv, hr_state *st);

@@ -207,12 +207,12 @@ static void next_round(rad_solver *sv, hr_state *st)
 	repend(sv, st);
 }
 
-/* List the children of the next parents in todo, up to HR_BATCH_PAIRS
- * (the children of one parent are never parted). */
+/* List the children of the next parents in todo, up to st->batch (the
+ * children of one parent are never parted). */
 static rad_status expand_batch(rad_solver *sv, hr_state *st)
 {
 	rad_wave *w = &st->wave;
-	while (w->parents_next < w->parents.n && w->todo.n < HR_BATCH_PAIRS) {
+	while (w->parents_next < w->parents.n && w->todo.n < st->batch) {
 		const hr_pair *p =
 		        (const hr_pair *)w->parents.v + w->parents_next;
 		uint32_t kr[WAVE_KIDS], ks[WAVE_KIDS];
