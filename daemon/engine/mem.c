@@ -64,15 +64,22 @@ int rad_mem_room(const rad_mem *m, size_t bytes)
 	       atomic_load(&m->charged) + (int64_t)bytes <= m->budget;
 }
 
-size_t rad_mem_usable(const void *p)
+/* The malloc block of p, a pointer rad_mem_alloc and friends handed
+ * out: where its prefix starts. */
+static void *block_of(const void *p)
 {
-	return malloc_usable_size((unsigned char *)p - RAD_MEM_PREFIX);
+	return (unsigned char *)(uintptr_t)p - RAD_MEM_PREFIX;
 }
 
-/* The block p's prefix: the size asked for, prefix included. */
-static size_t *prefix(void *p)
+/* The size asked for block b, prefix included (its prefix). */
+static size_t *asked(void *b)
 {
-	return (size_t *)(void *)((unsigned char *)p - RAD_MEM_PREFIX);
+	return (size_t *)b;
+}
+
+size_t rad_mem_usable(const void *p)
+{
+	return malloc_usable_size(block_of(p));
 }
 
 void rad_mem_report_clear(rad_mem_report *r)
@@ -236,7 +243,7 @@ static int must_fail(rad_mem *m, rad_mem_kind kind, size_t size, size_t grow)
  * prefix written and counted; what the caller gets. */
 static void *take(rad_mem *m, rad_mem_kind kind, void *b, size_t size)
 {
-	*(size_t *)b = size;
+	*asked(b) = size;
 	count(m, kind, (int64_t)malloc_usable_size(b),
 	      (int64_t)usable_bound(size));
 	return (unsigned char *)b + RAD_MEM_PREFIX;
@@ -271,9 +278,9 @@ void *rad_mem_realloc(rad_mem *m, rad_mem_kind kind, void *p, size_t size)
 	if (size > SIZE_MAX - RAD_MEM_PREFIX)
 		return NULL;
 	size += RAD_MEM_PREFIX;
-	void *b = prefix(p);
+	void *b = block_of(p);
 	int64_t before = (int64_t)malloc_usable_size(b);
-	int64_t charged = (int64_t)usable_bound(*(size_t *)b);
+	int64_t charged = (int64_t)usable_bound(*asked(b));
 	int64_t most = (int64_t)usable_bound(size);
 	if (must_fail(m, kind,
 	              size > (size_t)before ? size - (size_t)before : 0,
@@ -282,7 +289,7 @@ void *rad_mem_realloc(rad_mem *m, rad_mem_kind kind, void *p, size_t size)
 	void *q = realloc(b, size);
 	if (!q)
 		return NULL;
-	*(size_t *)q = size;
+	*asked(q) = size;
 	count(m, kind, (int64_t)malloc_usable_size(q) - before, most - charged);
 	return (unsigned char *)q + RAD_MEM_PREFIX;
 }
@@ -291,9 +298,9 @@ void rad_mem_free(rad_mem *m, rad_mem_kind kind, void *p)
 {
 	if (!p)
 		return;
-	void *b = prefix(p);
+	void *b = block_of(p);
 	count(m, kind, -(int64_t)malloc_usable_size(b),
-	      -(int64_t)usable_bound(*(size_t *)b));
+	      -(int64_t)usable_bound(*asked(b)));
 	free(b);
 }
 

@@ -45,7 +45,7 @@ typedef struct rad_mem {
 	_Atomic int64_t total;                 /* sum of bytes[] */
 	_Atomic int64_t peak;                  /* high-water mark of total */
 	_Atomic int64_t work;                  /* total minus RAD_MEM_STUDY */
-	_Atomic int64_t charged;   /* work as its requests bound it (DESIGN) */
+	_Atomic int64_t charged;   /* work as its requests bound it (above) */
 	_Atomic int64_t peak_work; /* its high-water mark */
 	/* What this set is used with (a solver's scene), or NULL: the
 	 * high-water marks of total and work plus the base's at the time. */

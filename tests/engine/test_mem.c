@@ -830,13 +830,6 @@ static void test_budget_restart(void **state)
 	rad_scene_free(s);
 }
 
-/*
- * Every budget between the hierarchy's size and the unbudgeted peak: a
- * solver is either refused when it is made (naming the budget) or runs
- * its steps to the end within the budget -- never failing half way, as
- * rmb did when the work list of its walk grew past the room left (here
- * at 10 %, in its first step).
- */
 /* Budgets of the sweep, in % of the unbudgeted peak.  Under TSan every
  * step runs about six times slower and test_mem took 650-710 s of its
  * 900 s timeout, the sweep the most of it: there every third budget of
@@ -847,6 +840,13 @@ static void test_budget_restart(void **state)
 #define SWEEP_STEP 3
 #endif
 
+/*
+ * Every budget between the hierarchy's size and the unbudgeted peak: a
+ * solver is either refused when it is made (naming the budget) or runs
+ * its steps to the end within the budget -- never failing half way, as
+ * rmb did when the work list of its walk grew past the room left (here
+ * at 10 %, in its first step).
+ */
 static void test_budget_sweep(void **state)
 {
 	(void)state;
