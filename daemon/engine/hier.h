@@ -343,15 +343,18 @@ double rad_hier_cover_dist(const rad_hier *h, uint32_t poly);
 /*
  * Build the polygon roots and the cluster tree.  min_edge in metres;
  * lists: 1 for classic HR's links (rad_hlink, on their receivers' lists),
- * 0 for the others' (rad_link).  On failure everything allocated is
- * released.
+ * 0 for the others' (rad_link); par (or NULL: the calling thread alone)
+ * measures the roots' exposed fractions.  On failure everything allocated
+ * is released.
  */
 /* Bytes of a block of each pool that grows: elements, links, and hr's
  * list heads or rmb's passive links' records (a budget keeps them free:
  * wave_room_for). */
 size_t rad_hier_grow_blocks(const rad_hier *h);
+typedef struct rad_par rad_par;
 rad_status rad_hier_init(rad_hier *h, const rad_scene *s, rad_mem *mem,
-                         double min_edge, int lists, rad_error *err);
+                         double min_edge, int lists, rad_par *par,
+                         rad_error *err);
 void rad_hier_destroy(rad_hier *h);
 /*
  * Check the trees and link lists (hier_check.c): 0, or -1 with msg naming

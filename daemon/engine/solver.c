@@ -47,9 +47,10 @@ static void solver_drop(rad_solver *sv)
 /* The solver's hierarchy and own state, from nothing. */
 static rad_status solver_build(rad_solver *sv, rad_error *err)
 {
-	rad_status st = rad_hier_init(&sv->h, sv->scene, &sv->mem,
-	                              sv->opt.min_edge_rel * sv->scene->diag,
-	                              sv->opt.solver == RAD_SOLVER_HR, err);
+	rad_status st =
+	        rad_hier_init(&sv->h, sv->scene, &sv->mem,
+	                      sv->opt.min_edge_rel * sv->scene->diag,
+	                      sv->opt.solver == RAD_SOLVER_HR, sv->par, err);
 	if (!st)
 		st = sv->ops->init(sv, err);
 	return st;

@@ -290,7 +290,7 @@ static void rmb_hier(const rad_scene *s, rad_mem *mem, rad_hier *h)
 {
 	rad_error err;
 	rad_mem_init(mem);
-	assert_int_equal(rad_hier_init(h, s, mem, 0.0, 0, &err), RAD_OK);
+	assert_int_equal(rad_hier_init(h, s, mem, 0.0, 0, NULL, &err), RAD_OK);
 }
 
 /*
