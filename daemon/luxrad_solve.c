@@ -52,6 +52,7 @@ typedef struct run_log {
 	size_t n, cap;
 	uint64_t rays;        /* sum over iterations */
 	double load_seconds;  /* parse + scene build + BVH */
+	double setup_seconds; /* the solver's hierarchy (rad_solver_new) */
 	double solve_seconds; /* wall time of all iterations */
 	int converged;
 } run_log;
@@ -217,6 +218,7 @@ static int print_json(const report *r)
 	json_object_set_new(o, "options", ej_options(&r->a->opt));
 	json_object_set_new(o, "seconds", ej_real(r->lg->solve_seconds));
 	json_object_set_new(o, "load_seconds", ej_real(r->lg->load_seconds));
+	json_object_set_new(o, "setup_seconds", ej_real(r->lg->setup_seconds));
 	json_object_set_new(o, "query_seconds", ej_real(r->query_seconds));
 	json_object_set_new(o, "converged", json_boolean(r->lg->converged));
 	json_object_set_new(o, "rays_total", jint(r->lg->rays));
@@ -285,10 +287,11 @@ static void print_text_iterations(const report *r)
 		       s->error_estimate, (long long)s->mem.total);
 	}
 	printf("%s after %u iterations in %.3f s (error estimate %.3g, "
-	       "tolerance %g)\n",
+	       "tolerance %g; solver made in %.3f s)\n",
 	       r->lg->converged ? "converged" : "NOT converged",
 	       r->final->iteration, r->lg->solve_seconds,
-	       r->final->error_estimate, r->a->opt.converge_tol);
+	       r->final->error_estimate, r->a->opt.converge_tol,
+	       r->lg->setup_seconds);
 	printf("links %llu (ss %llu, sc %llu, cc %llu, light %llu), "
 	       "rays %llu\n",
 	       (unsigned long long)r->final->links,
@@ -510,7 +513,10 @@ static int solve_and_report(const cli_args *a, const rad_scene *sc,
 		fprintf(stderr, "luxrad-solve: out of memory\n");
 		return EXIT_SOLVE;
 	}
-	if (rad_solver_new(sc, &a->opt, &sv, &err) != RAD_OK) {
+	double t0 = rad_seconds();
+	rad_status made = rad_solver_new(sc, &a->opt, &sv, &err);
+	lg.setup_seconds = rad_seconds() - t0;
+	if (made != RAD_OK) {
 		rc = engine_error("cannot make the solver", &err);
 	} else if (run_solver(sv, a, &lg, &err) != 0) {
 		rc = engine_error("solve failed", &err);

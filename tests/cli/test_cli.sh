@@ -145,7 +145,7 @@ import json, math, sys
 path, npts, niter = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
 d = json.load(open(path))
 keys = ["illuminance_lux", "error_lux", "solver", "options", "seconds",
-        "load_seconds", "query_seconds", "converged", "rays_total", "stats",
+        "load_seconds", "setup_seconds", "query_seconds", "converged", "rays_total", "stats",
         "scene", "per_iteration"]
 missing = [k for k in keys if k not in d]
 assert not missing, "missing keys %s" % missing
