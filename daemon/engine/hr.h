@@ -29,6 +29,10 @@ typedef struct hr_state {
 	double *vals;      /* scratch for budget_cut */
 	size_t vals_cap;
 	uint32_t batch; /* children pairs listed at a time (hr_init) */
+	/* One per thread: the statistics' walks (hr.c, tally_walk).  STUDY,
+	 * which a memory budget leaves out: their size depends on the
+	 * threads, and the budget's judgement must not. */
+	rad_stats *tally;
 } hr_state;
 
 /* Children pairs listed at a time by the waves (hr_refine.c), at most. */
@@ -56,5 +60,13 @@ int hr_refine_left(const hr_state *st);
  * then every polygon's quadtree; stops at the first failure. */
 typedef rad_status (*hr_node_fn)(rad_solver *sv, void *ud, uint32_t tagged);
 rad_status hr_walk_all(rad_solver *sv, hr_node_fn fn, void *ud);
+/*
+ * The same nodes on the solver's threads, in no set order: fn gets the
+ * ud of the thread that runs it (uds + thread x ud_size, one per
+ * rad_par_threads) and must not fail (its status is ignored) nor write
+ * anything but its ud.  For counts, whose sums do not depend on who
+ * counted what.
+ */
+void hr_walk_par(rad_solver *sv, hr_node_fn fn, void *uds, size_t ud_size);
 
 #endif

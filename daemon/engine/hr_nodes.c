@@ -804,10 +804,9 @@ double node_area(const rad_hier *h, uint32_t t)
 	return rad_elem_area(h, rad_elem_at(h, t));
 }
 
-void node_stat_exchange(rad_solver *sv, uint32_t r, uint32_t s, double ff,
-                        double b, double inc)
+void node_stat_exchange(const rad_solver *sv, rad_stats *S, uint32_t r,
+                        uint32_t s, double ff, double b, double inc)
 {
-	rad_stats *S = &sv->stats;
 	/* What it carries: the oracle's BFA value without the clusters'
 	 * worst-case factor. */
 	double e = b * ff * node_area_eff(&sv->h, r) / sv->flux_scale;

@@ -82,12 +82,12 @@ double node_oracle(const rad_solver *sv, uint32_t rcv, uint32_t src, double b,
                    double f);
 /*
  * Study statistics of one exchange of form factor ff from src to rcv:
- * counts it as gathered, as useful when its increment (photopic inc)
+ * counts it in S as gathered, as useful when its increment (photopic inc)
  * would fail the oracle one level up, and in the energy histogram by
  * what it carries (photopic radiosity b).  See rad_stats.
  */
-void node_stat_exchange(rad_solver *sv, uint32_t r, uint32_t s, double ff,
-                        double b, double inc);
+void node_stat_exchange(const rad_solver *sv, rad_stats *S, uint32_t r,
+                        uint32_t s, double ff, double b, double inc);
 /* Count a stored link rcv <- src in s->links and its kind (links_ss ...
  * light). */
 void node_count_link(rad_stats *s, uint32_t rcv, uint32_t src);

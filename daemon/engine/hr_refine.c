@@ -512,6 +512,59 @@ rad_status hr_walk_all(rad_solver *sv, hr_node_fn fn, void *ud)
 	return rs;
 }
 
+/* hr_walk_par's tasks: the cluster subtrees WALK_DEPTH levels down (the
+ * levels above are walked first, on the calling thread), then the
+ * polygons' trees, WALK_ROOTS roots a task. */
+#define WALK_DEPTH 6
+#define WALK_ROOTS 2048
+
+typedef struct walk_par {
+	rad_solver *sv;
+	hr_node_fn fn;
+	char *uds;
+	size_t ud_size;
+	uint32_t sub[1u << WALK_DEPTH];
+	uint32_t nsub;
+} walk_par;
+
+static void walk_top(walk_par *w, uint32_t id, int depth)
+{
+	if (depth == 0) {
+		w->sub[w->nsub++] = id;
+		return;
+	}
+	w->fn(w->sv, w->uds, id | RAD_TAG_CLUSTER);
+	uint32_t c = rad_cluster_at(&w->sv->h, id)->child;
+	for (uint32_t k = 0; k < 2 && c != RAD_NONE; k++)
+		walk_top(w, c + k, depth - 1);
+}
+
+static void walk_tasks(void *ud, size_t begin, size_t end, int thread)
+{
+	walk_par *w = ud;
+	void *mine = w->uds + (size_t)thread * w->ud_size;
+	uint32_t n = w->sv->scene->npolys;
+	for (size_t i = begin; i < end; i++) {
+		if (i < w->nsub) {
+			walk_cluster(w->sv, w->sub[i], w->fn, mine);
+			continue;
+		}
+		uint32_t r = (uint32_t)(i - w->nsub) * WALK_ROOTS;
+		uint32_t last = n - r < WALK_ROOTS ? n : r + WALK_ROOTS;
+		for (; r < last; r++)
+			walk_elem(w->sv, r, w->fn, mine);
+	}
+}
+
+void hr_walk_par(rad_solver *sv, hr_node_fn fn, void *uds, size_t ud_size)
+{
+	walk_par w = {.sv = sv, .fn = fn, .uds = uds, .ud_size = ud_size};
+	walk_top(&w, 0, WALK_DEPTH);
+	size_t roots =
+	        (sv->scene->npolys + (size_t)WALK_ROOTS - 1) / WALK_ROOTS;
+	rad_par_for(sv->par, w.nsub + roots, 1, walk_tasks, &w);
+}
+
 static rad_status retest_cluster(rad_solver *sv, void *ud, uint32_t t)
 {
 	double kept;

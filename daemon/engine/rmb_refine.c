@@ -271,7 +271,7 @@ static rad_status gather(rad_solver *sv, uint32_t r, uint32_t s, double ff,
 		if (rs)
 			return rs;
 	}
-	node_stat_exchange(sv, r, s, ff, b, b);
+	node_stat_exchange(sv, &sv->stats, r, s, ff, b, b);
 	sv->stats.links_transient += (uint64_t)transient;
 	return RAD_OK;
 }

@@ -89,7 +89,8 @@ void rad_error_clear(rad_error *err);
 	X(LINKS, "links")       /* link pool (active and passive) */           \
 	X(MATRIX, "matrix")     /* the matrix solver's form factors */         \
 	X(SCRATCH, "scratch")   /* per-iteration work buffers */               \
-	X(STUDY, "study")       /* study statistics (rad_options.study) */     \
+	X(STUDY, "study")       /* statistics' own (rad_options.study; hr's    \
+	                           per-thread tallies) */                      \
 	X(SOLUTION, "solution") /* published copies (rad_solution) */
 
 typedef enum rad_mem_kind {
