@@ -3,6 +3,7 @@
  * library holds, pools keep records in place, and every kind returns to
  * zero when a scene and its solver are freed.
  */
+#include <float.h>
 #include <malloc.h>
 #include <setjmp.h>
 #include <stdarg.h>
@@ -929,6 +930,28 @@ static void expect_near(const float *got, const double *want, double scale,
 			         id, what, k, got[k], want[k]);
 }
 
+/* The clusters of h's tree in pre-order, tree order, no pool order (hier.h,
+ * liveness); returns how many. */
+static uint32_t
+cluster_walk(const rad_hier *h,
+             void (*fn)(const rad_hier *h, uint32_t id, void *ud), void *ud)
+{
+	uint32_t stack[64], n = 0, seen = 0;
+	stack[n++] = 0;
+	while (n > 0) {
+		uint32_t id = stack[--n];
+		const rad_cluster *c = rad_cluster_at(h, id);
+		fn(h, id, ud);
+		seen++;
+		if (c->child == RAD_NONE)
+			continue;
+		assert_true(n + 2 <= 64);
+		stack[n++] = c->child + 1;
+		stack[n++] = c->child;
+	}
+	return seen;
+}
+
 /* A solver of kind k on s, with the defaults, two steps on. */
 static rad_solver *two_steps(const rad_scene *s, rad_solver_kind k)
 {
@@ -943,6 +966,30 @@ static rad_solver *two_steps(const rad_scene *s, rad_solver_kind k)
 	return sv;
 }
 
+typedef struct light_count {
+	double top; /* the root's photopic B: the scale of the checks */
+	uint32_t leaves, inner, moved;
+} light_count;
+
+static void check_light(const rad_hier *h, uint32_t id, void *ud)
+{
+	light_count *lc = ud;
+	const rad_cluster *c = rad_cluster_at(h, id);
+	double B[3], dB[3], nB[3], ndB[3];
+	float gdB[3], gndB[3];
+	cluster_sums(h, c, B, dB, nB, ndB);
+	rad_cluster_delta(h, c, gdB, gndB);
+	expect_near(c->B, B, lc->top, "B", id);
+	expect_near(c->nB, nB, lc->top * c->area, "nB", id);
+	expect_near(gdB, dB, lc->top, "dB", id);
+	expect_near(gndB, ndB, lc->top * c->area, "ndB", id);
+	lc->moved += rad_luma(gdB) != 0;
+	if (c->child == RAD_NONE)
+		lc->leaves++;
+	else
+		lc->inner++;
+}
+
 /* Storage by kind: every cluster keeps B and nB, only inner ones keep dB
  * and ndB (rad_cluster_inner), and a leaf's are summed when asked.  After
  * steps of hr and rmb every cluster's four agree with its polygons. */
@@ -952,37 +999,65 @@ static void test_cluster_light_by_kind(void **state)
 	rad_scene *s = grid_room(8);
 	for (int k = 0; k < 2; k++) {
 		rad_solver *sv = two_steps(s, hier_kinds[k]);
-		const rad_hier *h = &sv->h;
-		uint32_t stack[64], n = 0, leaves = 0, inner = 0, moved = 0;
-		stack[n++] = 0;
-		double top = rad_luma(rad_cluster_at(h, 0)->B);
-		assert_true(top > 0);
-		while (n > 0) {
-			uint32_t id = stack[--n];
-			const rad_cluster *c = rad_cluster_at(h, id);
-			double B[3], dB[3], nB[3], ndB[3];
-			float gdB[3], gndB[3];
-			cluster_sums(h, c, B, dB, nB, ndB);
-			rad_cluster_delta(h, c, gdB, gndB);
-			expect_near(c->B, B, top, "B", id);
-			expect_near(c->nB, nB, top * c->area, "nB", id);
-			expect_near(gdB, dB, top, "dB", id);
-			expect_near(gndB, ndB, top * c->area, "ndB", id);
-			moved += rad_luma(gdB) != 0;
-			if (c->child == RAD_NONE) {
-				leaves++;
-				continue;
-			}
-			inner++;
-			assert_true(n + 2 <= 64);
-			stack[n++] = c->child;
-			stack[n++] = c->child + 1;
-		}
-		assert_true(leaves > 8 && inner == leaves - 1);
-		assert_true(moved > 0); /* dB is not trivially zero */
+		light_count lc = {
+		        .top = rad_luma(rad_cluster_at(&sv->h, 0)->B)};
+		assert_true(lc.top > 0);
+		cluster_walk(&sv->h, check_light, &lc);
+		assert_true(lc.leaves > 8 && lc.inner == lc.leaves - 1);
+		assert_true(lc.moved > 0); /* dB is not trivially zero */
 		rad_solver_free(sv);
 	}
 	rad_scene_free(s);
+}
+
+typedef struct leaf_count {
+	uint32_t leaves, partial, partial_end;
+} leaf_count;
+
+static void count_leaf(const rad_hier *h, uint32_t id, void *ud)
+{
+	leaf_count *lc = ud;
+	const rad_cluster *c = rad_cluster_at(h, id);
+	if (c->child != RAD_NONE)
+		return;
+	lc->leaves++;
+	assert_true(c->count >= 1 && c->count <= RAD_CLUSTER_LEAF_MAX);
+	if (c->count < RAD_CLUSTER_LEAF_MAX) {
+		lc->partial++;
+		lc->partial_end = c->first + c->count;
+	}
+}
+
+/* Each cluster's box against its polygons' corners, as poly_bounds makes
+ * them (hier.c: the origin plus the edges, in double, each rounded to
+ * float): an inner cluster's box is its children's union (bound_inner),
+ * which has to be the same floats. */
+static void check_box(const rad_hier *h, uint32_t id, void *ud)
+{
+	const rad_scene *s = h->scene;
+	const rad_cluster *c = rad_cluster_at(h, id);
+	float lo[3] = {FLT_MAX, FLT_MAX, FLT_MAX};
+	float hi[3] = {-FLT_MAX, -FLT_MAX, -FLT_MAX};
+	(void)ud;
+	for (uint32_t j = c->first; j < c->first + c->count; j++) {
+		const rad_poly *p = &s->polys[h->order[j]];
+		v3 a = rad_scene_vertex(s, p->v[0]), e2 = rad_poly_e2(s, p);
+		v3 b = v3_add(a, rad_poly_e1(s, p));
+		v3 pts[4] = {a, b, v3_add(a, e2), v3_add(b, e2)};
+		for (int i = 0; i < (p->quad ? 4 : 3); i++) {
+			float q[3] = {(float)pts[i].x, (float)pts[i].y,
+			              (float)pts[i].z};
+			for (int k = 0; k < 3; k++) {
+				lo[k] = q[k] < lo[k] ? q[k] : lo[k];
+				hi[k] = q[k] > hi[k] ? q[k] : hi[k];
+			}
+		}
+	}
+	for (int k = 0; k < 3; k++)
+		if (lo[k] != c->lo[k] || hi[k] != c->hi[k])
+			fail_msg("cluster %u, axis %d: box %a .. %a, its "
+			         "polygons %a .. %a",
+			         id, k, c->lo[k], c->hi[k], lo[k], hi[k]);
 }
 
 /*
@@ -1000,32 +1075,17 @@ static void test_cluster_leaves_full(void **state)
 		rad_mem mem;
 		rad_hier h;
 		rmb_hier(s, &mem, &h);
-		uint32_t stack[64], n = 0, leaves = 0, partial = 0, inner = 0;
-		stack[n++] = 0;
-		while (n > 0) {
-			const rad_cluster *c = rad_cluster_at(&h, stack[--n]);
-			if (c->child != RAD_NONE) {
-				inner++;
-				assert_true(n + 2 <= 64);
-				stack[n++] = c->child;
-				stack[n++] = c->child + 1;
-				continue;
-			}
-			leaves++;
-			assert_true(c->count >= 1 &&
-			            c->count <= RAD_CLUSTER_LEAF_MAX);
-			if (c->count < RAD_CLUSTER_LEAF_MAX) {
-				partial++;
-				assert_int_equal(c->first + c->count,
-				                 s->npolys);
-			}
-		}
+		leaf_count lc = {0};
+		uint32_t all = cluster_walk(&h, count_leaf, &lc);
 		uint32_t want = (s->npolys + RAD_CLUSTER_LEAF_MAX - 1) /
 		                RAD_CLUSTER_LEAF_MAX;
-		assert_int_equal(leaves, want);
-		assert_int_equal(inner, leaves - 1);
-		assert_int_equal(partial,
+		assert_int_equal(lc.leaves, want);
+		assert_int_equal(all - lc.leaves, lc.leaves - 1);
+		assert_int_equal(lc.partial,
 		                 s->npolys % RAD_CLUSTER_LEAF_MAX != 0);
+		if (lc.partial)
+			assert_int_equal(lc.partial_end, s->npolys);
+		cluster_walk(&h, check_box, NULL);
 		char msg[200];
 		assert_int_equal(rad_hier_check(&h, msg, sizeof(msg)), 0);
 		rad_hier_destroy(&h);
