@@ -70,10 +70,14 @@ static uint32_t edge_of(const edge_map *m, uint32_t slot)
 }
 
 /* Slot holding the directed edge a -> b (vertex ids), or the empty slot
- * ending the probe sequence. */
-static uint32_t *edge_probe(const edge_map *m, uint32_t a, uint32_t b)
+ * ending the probe sequence; *tag (or NULL) gets the hash bits a slot of
+ * that edge keeps. */
+static uint32_t *edge_probe(const edge_map *m, uint32_t a, uint32_t b,
+                            uint32_t *tag_out)
 {
 	uint32_t h = edge_hash(a, b), tag = h & m->tags;
+	if (tag_out)
+		*tag_out = tag;
 	for (uint32_t i = h & m->mask;; i = (i + 1) & m->mask) {
 		uint32_t e = m->slot[i];
 		if (e == RAD_NONE)
@@ -106,14 +110,14 @@ static rad_status edge_map_build(edge_map *m, rad_scene *s)
 	memset(m->slot, 0xff, (size_t)cap * 4);
 	for (uint32_t t = 0; t < ntri; t++) {
 		for (int k = 0; k < 3; k++) {
-			uint32_t a = tri_vertex(s, t, k),
-			         b = tri_vertex(s, t, k + 1);
-			uint32_t *slot = edge_probe(m, a, b);
+			uint32_t tag;
+			uint32_t *slot =
+			        edge_probe(m, tri_vertex(s, t, k),
+			                   tri_vertex(s, t, k + 1), &tag);
 			/* A repeated directed edge (non-manifold or
 			 * duplicate geometry): the first keeps it. */
 			if (*slot == RAD_NONE)
-				*slot = (edge_hash(a, b) & m->tags) |
-				        (t * 3 + (uint32_t)k);
+				*slot = tag | (t * 3 + (uint32_t)k);
 		}
 	}
 	return RAD_OK;
@@ -222,8 +226,9 @@ static int duplicate_of_earlier(const rad_scene *s, const edge_map *m,
                                 uint32_t t)
 {
 	for (int k = 0; k < 3; k++) {
-		uint32_t e = edge_of(m, *edge_probe(m, tri_vertex(s, t, k),
-		                                    tri_vertex(s, t, k + 1)));
+		uint32_t e =
+		        edge_of(m, *edge_probe(m, tri_vertex(s, t, k),
+		                               tri_vertex(s, t, k + 1), NULL));
 		uint32_t u = e / 3;
 		if (e == RAD_NONE || u >= t)
 			continue;
@@ -246,7 +251,7 @@ static rad_status pair_triangle(rad_scene *s, const edge_map *m, uint8_t *pair,
 	for (int i = 0; i < 3; i++) {
 		int k = order[i];
 		uint32_t e = edge_of(m, *edge_probe(m, tri_vertex(s, t, k + 1),
-		                                    tri_vertex(s, t, k)));
+		                                    tri_vertex(s, t, k), NULL));
 		if (e == RAD_NONE || e / 3 == t || pair[e / 3] != PAIR_NONE)
 			continue;
 		uint32_t u = e / 3;

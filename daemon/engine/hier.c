@@ -15,7 +15,6 @@
 #include <string.h>
 
 #include "ff.h"
-#include "par.h"
 #include "rad.h"
 #include "vis.h"
 
@@ -239,7 +238,7 @@ static void fill_cluster(rad_hier *h, uint32_t c, const double *ctr, int depth,
 	}
 	rad_cluster *cl = rad_cluster_at(h, c);
 	int leaf = cl->child == RAD_NONE;
-	for (int k = 0; k < 3; k++) {
+	for (int k = 0; leaf && k < 3; k++) {
 		cl->lo[k] = FLT_MAX;
 		cl->hi[k] = -FLT_MAX;
 	}
@@ -351,10 +350,7 @@ static rad_status build_clusters(rad_hier *h, rad_par *par, rad_error *err)
 	if (!st) {
 		fill_work w = {.h = h, .ctr = ctr};
 		fill_cluster(h, 0, ctr, FILL_DEPTH, &w);
-		if (par)
-			rad_par_for(par, w.nroots, 1, fill_subtrees, &w);
-		else
-			fill_subtrees(&w, 0, w.nroots, 0);
+		rad_par_for(par, w.nroots, 1, fill_subtrees, &w);
 		bound_inner(h, 0);
 	}
 	rad_mem_free(h->mem, RAD_MEM_SCRATCH, ctr);
@@ -491,10 +487,8 @@ rad_status rad_hier_init(rad_hier *h, const rad_scene *s, rad_mem *mem,
 		no_links(rad_pool_at(&h->heads, 0), n);
 	h->nleaves = n;
 	/* After the roots' edges are known (rad_hier_cover_dist). */
-	if (s->vis && par)
+	if (s->vis)
 		rad_par_for(par, n, COVER_GRAIN, measure_roots, h);
-	else if (s->vis)
-		measure_roots(h, 0, n, 0);
 	rad_cluster *root = rad_cluster_at(h, 0);
 	root->first = 0;
 	root->count = n;

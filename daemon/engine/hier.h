@@ -159,6 +159,7 @@
 
 #include "ff.h"
 #include "mem.h"
+#include "par.h"
 #include "scene.h"
 #include "vec.h"
 
@@ -344,14 +345,13 @@ double rad_hier_cover_dist(const rad_hier *h, uint32_t poly);
  * Build the polygon roots and the cluster tree.  min_edge in metres;
  * lists: 1 for classic HR's links (rad_hlink, on their receivers' lists),
  * 0 for the others' (rad_link); par (or NULL: the calling thread alone)
- * measures the roots' exposed fractions.  On failure everything allocated
- * is released.
+ * measures the roots' exposed fractions and fills the cluster subtrees.
+ * On failure everything allocated is released.
  */
 /* Bytes of a block of each pool that grows: elements, links, and hr's
  * list heads or rmb's passive links' records (a budget keeps them free:
  * wave_room_for). */
 size_t rad_hier_grow_blocks(const rad_hier *h);
-typedef struct rad_par rad_par;
 rad_status rad_hier_init(rad_hier *h, const rad_scene *s, rad_mem *mem,
                          double min_edge, int lists, rad_par *par,
                          rad_error *err);

@@ -160,6 +160,10 @@ void rad_par_for(rad_par *p, size_t n, size_t grain, rad_par_fn fn, void *ud)
 {
 	if (n == 0)
 		return;
+	if (!p) {
+		fn(ud, 0, n, 0);
+		return;
+	}
 	if (grain == 0)
 		grain = 1;
 	pthread_mutex_lock(&p->lock);

@@ -24,7 +24,8 @@ rad_status rad_par_new(int nthreads, rad_par **out, rad_error *err);
 void rad_par_free(rad_par *p);
 int rad_par_threads(const rad_par *p);
 
-/* Run fn over [0, n) in chunks of grain (>= 1); returns when all are done. */
+/* Run fn over [0, n) in chunks of grain (>= 1); returns when all are done.
+ * p NULL: on the calling thread alone, as rad_par_threads counts it. */
 void rad_par_for(rad_par *p, size_t n, size_t grain, rad_par_fn fn, void *ud);
 
 #endif
