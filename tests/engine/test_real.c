@@ -130,7 +130,7 @@ static void test_graz_office(void **state)
 {
 	(void)state;
 	static const level lv[] = {{RAD_SOLVER_HR, 0.031, 0.20},
-	                           {RAD_SOLVER_RMB, 0.069, 0.29}};
+	                           {RAD_SOLVER_RMB, 0.054, 0.25}};
 	hold_room("graz.gltf", "graz.points", lv, 2);
 }
 
@@ -138,7 +138,7 @@ static void test_hospital_room(void **state)
 {
 	(void)state;
 	static const level lv[] = {{RAD_SOLVER_HR, 0.057, 0.16},
-	                           {RAD_SOLVER_RMB, 0.143, 0.42}};
+	                           {RAD_SOLVER_RMB, 0.107, 0.31}};
 	hold_room("hospital.gltf", "hospital.points", lv, 2);
 }
 
