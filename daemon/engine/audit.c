@@ -98,9 +98,8 @@ static void audit_link(const rad_solver *sv, uint32_t r, uint32_t s, double ff,
                        double *cum_s, rad_audit *out)
 {
 	const rad_hier *h = &sv->h;
-	double d = v3_len(v3_sub(node_center(h, r), node_center(h, s)));
-	int near = fmax(node_size(h, r), node_size(h, s)) > d;
-	int k = 4 * near + 2 * node_is_cluster(r) + node_is_cluster(s);
+	int k = 4 * node_near(h, r, s) + 2 * node_is_cluster(r) +
+	        node_is_cluster(s);
 	double ar = node_area(h, r), as = node_area(h, s);
 	double bs = node_luma_B(h, s);
 	if (node_is_cluster(r))

@@ -208,6 +208,12 @@ v3 node_center(const rad_hier *h, uint32_t t)
 	return rad_patch_centroid(&p);
 }
 
+int node_near(const rad_hier *h, uint32_t a, uint32_t b)
+{
+	double d = v3_len(v3_sub(node_center(h, a), node_center(h, b)));
+	return fmax(node_size(h, a), node_size(h, b)) > d;
+}
+
 /* Isotropic estimate: source area-equivalent as over a distance d. */
 static double iso_ff(double as, double cosr, double d2)
 {

@@ -49,6 +49,9 @@ double node_size(const rad_hier *h, uint32_t t);
 /* Centre of a surface or cluster node: the element's centroid, the
  * cluster's box centre. */
 v3 node_center(const rad_hier *h, uint32_t t);
+/* 1 if the larger of two surface or cluster nodes is larger (node_size)
+ * than the distance between their centres: the link audit's "near". */
+int node_near(const rad_hier *h, uint32_t a, uint32_t b);
 /*
  * Children of a splittable node, tagged, into out[RAD_CLUSTER_LEAF_MAX]
  * (elements are split on demand: not thread-safe).  Returns the count, 0

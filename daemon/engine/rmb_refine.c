@@ -163,9 +163,9 @@ static int rcv_too_coarse(const rad_solver *sv, uint32_t r, double e)
 /* ------------------------------------------------------------- judging */
 
 /*
- * The oracle of a pair (node_oracle), counted RMB_NEAR times where one
- * end is a cluster and the larger end is larger than the distance
- * between their centres (the link audit's "near" classes, audit.c).
+ * 1 if pair r <- s is to be refined: its oracle (node_oracle) passes eps,
+ * counted RMB_NEAR times where one end is a cluster and the pair is near
+ * (node_near, the link audit's "near" classes).
  * Such a pair's form factor is read from the kernel at a few polygon
  * centroids (ff_iso, node_ff_estimate), which the audit finds low by a
  * quarter to a half.  rmb's oracle reads dB, which shrinks at every
@@ -187,15 +187,17 @@ static int rcv_too_coarse(const rad_solver *sv, uint32_t r, double e)
  * moved its Graz office from 2.8 % to 4.1 % (README, Limitations).
  */
 #define RMB_NEAR 4.0
-static double rmb_oracle(const rad_solver *sv, uint32_t r, uint32_t s, double b,
-                         double f)
+static int rmb_refines(const rad_solver *sv, uint32_t r, uint32_t s, double b,
+                       double f)
 {
-	const rad_hier *h = &sv->h;
 	double o = node_oracle(sv, r, s, b, f);
-	if (node_is_light(s) || (!node_is_cluster(r) && !node_is_cluster(s)))
-		return o;
-	double d = v3_len(v3_sub(node_center(h, r), node_center(h, s)));
-	return fmax(node_size(h, r), node_size(h, s)) > d ? RMB_NEAR * o : o;
+	if (o > sv->opt.eps)
+		return 1;
+	/* The centres (an element's patch) only where the factor decides. */
+	if (!(RMB_NEAR * o > sv->opt.eps) || node_is_light(s) ||
+	    (!node_is_cluster(r) && !node_is_cluster(s)))
+		return 0;
+	return node_near(&sv->h, r, s);
 }
 
 /*
@@ -229,8 +231,7 @@ static uint8_t judge(rad_solver *sv, const void *item, int may_split,
 		return WAVE_DROP;
 	double f = !fresh ? (l->ff > 0 ? l->ff : node_ff_bound(h, r, s))
 	                  : node_ff_estimate(h, r, s);
-	if (may_split && wave_refinable(h, r, s) &&
-	    rmb_oracle(sv, r, s, b, f) > sv->opt.eps)
+	if (may_split && wave_refinable(h, r, s) && rmb_refines(sv, r, s, b, f))
 		return WAVE_SPLIT;
 	int rcv_split = may_split && node_splittable(h, r);
 	if (!fresh) {
