@@ -45,7 +45,10 @@ rad_status wave_init(rad_solver *sv, rad_wave *w, size_t item_size)
 {
 	memset(w, 0, sizeof(*w));
 	w->item_size = (uint32_t)item_size;
-	w->rays = rad_mem_calloc(&sv->mem, RAD_MEM_SCRATCH,
+	/* Statistics, and the one thing the wave holds per thread: charged
+	 * to the budget, they would make its judgement depend on the
+	 * threads (16 bytes more for two threads flipped a room check). */
+	w->rays = rad_mem_calloc(&sv->mem, RAD_MEM_STUDY,
 	                         (size_t)rad_par_threads(sv->par),
 	                         sizeof(uint64_t));
 	return w->rays ? RAD_OK : RAD_ERR_NOMEM;
@@ -54,7 +57,7 @@ rad_status wave_init(rad_solver *sv, rad_wave *w, size_t item_size)
 void wave_destroy(rad_solver *sv, rad_wave *w)
 {
 	wave_release(sv, w);
-	rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, w->rays);
+	rad_mem_free(&sv->mem, RAD_MEM_STUDY, w->rays);
 	w->rays = NULL;
 }
 

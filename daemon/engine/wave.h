@@ -39,7 +39,7 @@ typedef struct rad_wave {
 	size_t parents_next;   /* the first of them not expanded yet */
 	wave_verdict *verdict; /* one per item of the wave run, SCRATCH */
 	size_t verdict_cap;
-	uint64_t *rays;     /* per-thread ray counters, SCRATCH */
+	uint64_t *rays;     /* per-thread ray counters, STUDY */
 	uint32_t item_size; /* bytes per item */
 	int force_store;    /* cancelled: pairs stay at the level reached */
 	int at_budget;      /* the memory budget is reached: pairs stay at

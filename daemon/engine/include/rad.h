@@ -90,7 +90,8 @@ void rad_error_clear(rad_error *err);
 	X(MATRIX, "matrix")     /* the matrix solver's form factors */         \
 	X(SCRATCH, "scratch")   /* per-iteration work buffers */               \
 	X(STUDY, "study")       /* statistics' own (rad_options.study; hr's    \
-	                           per-thread tallies) */                      \
+	                           per-thread tallies, the waves' per-thread   \
+	                           ray counts) */                              \
 	X(SOLUTION, "solution") /* published copies (rad_solution) */
 
 typedef enum rad_mem_kind {
