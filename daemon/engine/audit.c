@@ -48,7 +48,7 @@ static void leaf_patch(const rad_hier *h, uint32_t id, uint64_t *s,
 		id = e->child + (k > 3 ? 3 : k);
 		e = rad_elem_at(h, id);
 	}
-	rad_elem_patch(h, e, p);
+	rad_elem_patch(h, id, p);
 	*leaf = id;
 }
 

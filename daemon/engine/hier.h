@@ -76,8 +76,20 @@
  * at 1/200 of the scene's diagonal.  Storing the region (36 bytes) and
  * the area made an element 96 bytes.  Nor does an element keep its
  * parent (the walks come down the trees, and progressive's fresh
- * children carry theirs) or hr's list head (rad_hier.heads).  It is 52
- * bytes.
+ * children carry theirs) or hr's list head (rad_hier.heads).
+ * Runs.  What the four children of one split share -- their polygon,
+ * their depth and their parent's path -- and the exposed fraction each
+ * measured (below) are one record of the run (rad_elem_run, 16 bytes,
+ * rad_hier.runs), not fields of every element: sibling runs start at
+ * run0 (the roots' count rounded up to 4 in a solver's hierarchy, padded
+ * with unused records) and are 4-aligned from there, so element id's
+ * run is record (id - run0) / 4 and its quarter (id - run0) % 4.  A root
+ * is its own polygon at depth 0 with path 0, and keeps its exposed
+ * fraction in root_exposed.  An element is then 40 bytes (child, B, I,
+ * dB), where every field in it made 52: on the grand hall, whose
+ * elements are nearly all roots, hr's 16.6 MB of elements became 13.3
+ * MB (42 bytes an element with the runs, the roots' bytes and the
+ * blocks' slack).
  * Covered parts.  Scenes lay panels, windows, luminaires and boards a
  * few millimetres in front of walls and ceilings.  The part of a surface
  * behind such a cover takes no light and sends none, and an element that
@@ -169,14 +181,20 @@
 #define RAD_CLUSTER_LEAF_MAX 4
 
 typedef struct rad_elem {
-	uint32_t poly;           /* root polygon (geometry, material, normal) */
 	uint32_t child;          /* first of 4 children, RAD_NONE for a leaf */
 	float B[3], I[3], dB[3]; /* see DESIGN */
-	uint32_t path;           /* quarter taken at each level (Regions) */
-	uint8_t level;           /* depth below the polygon root */
-	uint8_t exposed;         /* 0 .. RAD_EXPOSED_ALL (Covered parts) */
-	uint8_t spare[2];
 } rad_elem;
+
+/* What the four children of one split share, and what each measured of
+ * its own (Runs): one record per sibling run, rad_hier.runs. */
+typedef struct rad_elem_run {
+	uint32_t poly;      /* root polygon (geometry, material, normal) */
+	uint32_t path;      /* the parent's path (Regions) */
+	uint8_t level;      /* the children's depth below the root, >= 1 */
+	uint8_t exposed[4]; /* child k's, 0 .. RAD_EXPOSED_ALL (Covered parts)
+	                     */
+	uint8_t spare[3];
+} rad_elem_run;
 
 typedef struct rad_cluster {
 	float lo[3], hi[3];    /* bounding box of the contents */
@@ -243,7 +261,8 @@ typedef struct rad_hlink {
 } rad_hlink;
 
 /* Sizes the memory study measures by (Regions; links above). */
-_Static_assert(sizeof(rad_elem) == 52, "rad_elem grew");
+_Static_assert(sizeof(rad_elem) == 40, "rad_elem grew");
+_Static_assert(sizeof(rad_elem_run) == 16, "rad_elem_run grew");
 _Static_assert(sizeof(rad_link) == 16, "rad_link grew");
 _Static_assert(sizeof(rad_link_ext) == 12, "rad_link_ext grew");
 _Static_assert(sizeof(rad_hlink) == 16, "rad_hlink grew");
@@ -252,11 +271,14 @@ _Static_assert(sizeof(rad_cluster_inner) == 52, "rad_cluster_inner grew");
 
 typedef struct rad_hier {
 	const rad_scene *scene;
-	rad_mem *mem;       /* the owning solver's counters */
-	rad_pool elems;     /* rad_elem, ELEM_SURFACE */
-	rad_pool clusters;  /* rad_cluster, ELEM_CLUSTER */
-	rad_pool links;     /* rad_link, or rad_hlink for hr; LINKS */
-	rad_pool links_ext; /* rad_link_ext of passive rad_links; LINKS */
+	rad_mem *mem;          /* the owning solver's counters */
+	rad_pool elems;        /* rad_elem, ELEM_SURFACE */
+	rad_pool runs;         /* rad_elem_run, ELEM_SURFACE (Runs) */
+	uint8_t *root_exposed; /* the roots' exposed fractions, ELEM_SURFACE */
+	uint32_t run0;         /* id of the first sibling run's first child */
+	rad_pool clusters;     /* rad_cluster, ELEM_CLUSTER */
+	rad_pool links;        /* rad_link, or rad_hlink for hr; LINKS */
+	rad_pool links_ext;    /* rad_link_ext of passive rad_links; LINKS */
 	/* hr: the head of each node's list of links received (RAD_NONE:
 	 * none), LINKS: elements' in a pool made in step with elems (the
 	 * same ids), clusters' an array.  Without lists (other solvers)
@@ -277,6 +299,40 @@ typedef struct rad_hier {
 static inline rad_elem *rad_elem_at(const rad_hier *h, uint32_t id)
 {
 	return (rad_elem *)rad_pool_at(&h->elems, id);
+}
+/* Elements live: the pool's records but the pad before the first run. */
+static inline uint32_t rad_hier_elements(const rad_hier *h)
+{
+	return rad_pool_live(&h->elems) - (h->run0 - h->scene->npolys);
+}
+
+/* The record of the sibling run element id (not a root) belongs to. */
+static inline rad_elem_run *rad_elem_run_of(const rad_hier *h, uint32_t id)
+{
+	return (rad_elem_run *)rad_pool_at(&h->runs, (id - h->run0) >> 2);
+}
+/* Element id's polygon, depth and path (Regions, Runs). */
+static inline uint32_t rad_elem_poly(const rad_hier *h, uint32_t id)
+{
+	return id < h->run0 ? id : rad_elem_run_of(h, id)->poly;
+}
+static inline int rad_elem_level(const rad_hier *h, uint32_t id)
+{
+	return id < h->run0 ? 0 : rad_elem_run_of(h, id)->level;
+}
+static inline uint32_t rad_elem_path(const rad_hier *h, uint32_t id)
+{
+	if (id < h->run0)
+		return 0;
+	const rad_elem_run *r = rad_elem_run_of(h, id);
+	return r->path | ((id - h->run0) & 3u) << (2 * (r->level - 1));
+}
+/* Element id's exposed fraction as stored, 0 .. RAD_EXPOSED_ALL. */
+static inline uint8_t rad_elem_exposed_raw(const rad_hier *h, uint32_t id)
+{
+	return id < h->run0
+	               ? h->root_exposed[id]
+	               : rad_elem_run_of(h, id)->exposed[(id - h->run0) & 3u];
 }
 static inline rad_cluster *rad_cluster_at(const rad_hier *h, uint32_t id)
 {
@@ -306,11 +362,10 @@ static inline uint32_t rad_cluster_pick(const rad_hier *h, const rad_cluster *c,
 #define RAD_COVER_SAMPLES 16
 
 /* The exposed fraction of an element's area (Covered parts). */
-static inline double rad_elem_exposed(const rad_elem *e)
+static inline double rad_elem_exposed(const rad_hier *h, uint32_t id)
 {
-	return e->exposed == RAD_EXPOSED_ALL
-	               ? 1.0
-	               : e->exposed / (double)RAD_EXPOSED_ALL;
+	uint8_t x = rad_elem_exposed_raw(h, id);
+	return x == RAD_EXPOSED_ALL ? 1.0 : x / (double)RAD_EXPOSED_ALL;
 }
 
 /*
@@ -365,11 +420,11 @@ int rad_hier_check(const rad_hier *h, char *msg, size_t len);
 
 #define RAD_ELEM_MAX_LEVEL 16 /* 2 bits of rad_elem.path a level */
 
-/* Element e's region (Regions): origin and edges, as rad_poly's. */
-void rad_elem_region(const rad_hier *h, const rad_elem *e, float p0[3],
-                     float e1[3], float e2[3]);
-/* Element e's region as a patch (rad_patch_from_floats). */
-void rad_elem_patch(const rad_hier *h, const rad_elem *e, rad_patch *p);
+/* Element id's region (Regions): origin and edges, as rad_poly's. */
+void rad_elem_region(const rad_hier *h, uint32_t id, float p0[3], float e1[3],
+                     float e2[3]);
+/* Element id's region as a patch (rad_patch_from_floats). */
+void rad_elem_patch(const rad_hier *h, uint32_t id, rad_patch *p);
 /* The same for element id, through a small memo per thread: judging a
  * pair asks for its two patches several times (hr_nodes.c).  An element
  * keeps its id and region while its hierarchy lives, and a hierarchy's
@@ -379,27 +434,30 @@ void rad_elem_patch_id(const rad_hier *h, uint32_t id, rad_patch *p);
  * rad_elem_split gives child k. */
 void rad_region_quarter(float p0[3], float e1[3], float e2[3], int quad, int k);
 
-/* Area of element e, m2: its polygon's times 4^-level, exact: the
+/* Area of element id, m2: its polygon's times 4^-level, exact: the
  * factor is built from its exponent bits (level <= RAD_ELEM_MAX_LEVEL, so it is
  * a normal float), and a product with a power of two rounds as ldexpf does,
  * without its call (the gather asks for it per link). */
-static inline float rad_elem_area(const rad_hier *h, const rad_elem *e)
+static inline float rad_elem_area(const rad_hier *h, uint32_t id)
 {
-	uint32_t bits = (uint32_t)(127 - 2 * (int)e->level) << 23;
+	if (id < h->run0)
+		return h->scene->polys[id].area;
+	const rad_elem_run *r = rad_elem_run_of(h, id);
+	uint32_t bits = (uint32_t)(127 - 2 * (int)r->level) << 23;
 	float quarter;
 	memcpy(&quarter, &bits, sizeof quarter);
-	return h->scene->polys[e->poly].area * quarter;
+	return h->scene->polys[r->poly].area * quarter;
 }
-/* 1 if e's polygon is a parallelogram, 0 for a triangle. */
-static inline int rad_elem_quad(const rad_hier *h, const rad_elem *e)
+/* 1 if element id's polygon is a parallelogram, 0 for a triangle. */
+static inline int rad_elem_quad(const rad_hier *h, uint32_t id)
 {
-	return h->scene->polys[e->poly].quad;
+	return h->scene->polys[rad_elem_poly(h, id)].quad;
 }
 
-/* Longest edge of an element's region, metres. */
-double rad_elem_edge(const rad_hier *h, const rad_elem *e);
-/* 1 if the element may be split (its edge exceeds min_edge). */
-int rad_elem_can_split(const rad_hier *h, const rad_elem *e);
+/* Longest edge of element id's region, metres. */
+double rad_elem_edge(const rad_hier *h, uint32_t id);
+/* 1 if element id may be split (its edge exceeds min_edge). */
+int rad_elem_can_split(const rad_hier *h, uint32_t id);
 /*
  * Make the four children of element id if it has none (B, dB copied from
  * the parent, I zero).  Returns the first child id, or RAD_NONE when out
@@ -434,16 +492,15 @@ void rad_hier_pull(rad_hier *h);
 #define RAD_PUSH_EXTRA 4
 typedef const float *(*rad_push_extra)(const rad_hier *h, uint32_t tagged,
                                        void *ud);
-typedef void (*rad_leaf_update)(rad_hier *h, rad_elem *leaf, const float *extra,
-                                void *ud);
+typedef void (*rad_leaf_update)(rad_hier *h, uint32_t id, rad_elem *leaf,
+                                const float *extra, void *ud);
 void rad_hier_push(rad_hier *h, rad_leaf_update leaf, rad_push_extra extra,
                    void *ud);
 
-/* Material of the polygon an element belongs to. */
-static inline const rad_material *rad_elem_mat(const rad_hier *h,
-                                               const rad_elem *e)
+/* Material of the polygon element id belongs to. */
+static inline const rad_material *rad_elem_mat(const rad_hier *h, uint32_t id)
 {
-	return &h->scene->mats[h->scene->polys[e->poly].mat];
+	return &h->scene->mats[h->scene->polys[rad_elem_poly(h, id)].mat];
 }
 
 /* Photopic luminance of an RGB value. */

@@ -78,12 +78,18 @@ static int check_elem(checker *c, uint32_t id)
 	}
 	if ((uint64_t)e->child + 4 > h->elems.count)
 		return fail(c, "element's children outside the pool", id);
+	if (e->child < h->run0 || (e->child - h->run0) % 4 != 0 ||
+	    (e->child - h->run0) / 4 >= h->runs.count)
+		return fail(c, "children are not a run of their own", id);
+	int level = rad_elem_level(h, id);
+	uint32_t path = rad_elem_path(h, id);
 	for (uint32_t k = 0; k < 4; k++) {
-		const rad_elem *ch = rad_elem_at(h, e->child + k);
-		if (ch->poly != e->poly || ch->level != e->level + 1)
+		uint32_t ch = e->child + k;
+		if (rad_elem_poly(h, ch) != rad_elem_poly(h, id) ||
+		    rad_elem_level(h, ch) != level + 1)
 			return fail(c, "child element disowns its parent", id);
-		if (ch->level > RAD_ELEM_MAX_LEVEL ||
-		    ch->path != (e->path | k << (2 * e->level)))
+		if (rad_elem_level(h, ch) > RAD_ELEM_MAX_LEVEL ||
+		    rad_elem_path(h, ch) != (path | k << (2 * level)))
 			return fail(c, "child element is not its quarter", id);
 	}
 	for (uint32_t k = 0; k < 4; k++)
@@ -127,12 +133,9 @@ int rad_hier_check(const rad_hier *h, char *msg, size_t len)
 {
 	checker c = {h, msg, len, 0};
 	uint32_t npolys = h->scene->npolys;
-	if (h->elems.count < npolys)
+	if (h->elems.count < npolys || h->run0 < npolys)
 		return fail(&c, "fewer elements than polygons", npolys);
 	for (uint32_t i = 0; i < npolys; i++) {
-		const rad_elem *e = rad_elem_at(h, i);
-		if (e->poly != i || e->level != 0 || e->path != 0)
-			return fail(&c, "polygon root misplaced", i);
 		if (check_elem(&c, i) != 0)
 			return -1;
 	}

@@ -123,9 +123,8 @@ static void gather_list(gather_job *g, uint32_t rcv, uint32_t head, float I[3],
 		id = l->next;
 	}
 	double a = node_area(h, rcv);
-	const rad_material *m = node_is_cluster(rcv)
-	                                ? NULL
-	                                : rad_elem_mat(h, rad_elem_at(h, rcv));
+	const rad_material *m =
+	        node_is_cluster(rcv) ? NULL : rad_elem_mat(h, rcv);
 	for (int c = 0; c < 3; c++) {
 		/* A black receiver sends nothing on, and cannot take more than
 		 * a full view of its sources (row sum 1; see gather_bounded).
@@ -234,10 +233,12 @@ static const float *push_extra(const rad_hier *h, uint32_t t, void *ud)
 
 /* A leaf's update: B = E + rho I (with clip, I from surfaces over the
  * leaf's gain where it passes 1: node_payload). */
-static void update_leaf(rad_hier *h, rad_elem *e, const float *x, void *ud)
+static void update_leaf(rad_hier *h, uint32_t id, rad_elem *e, const float *x,
+                        void *ud)
 {
 	push_acc *acc = ud;
-	const rad_material *m = rad_elem_mat(h, e);
+	const rad_material *m = rad_elem_mat(h, id);
+	float area = rad_elem_area(h, id);
 	float nb[3];
 	double rm = fmax(m->rho[0], fmax(m->rho[1], m->rho[2]));
 	if (x && rm * x[0] > 1)
@@ -245,12 +246,11 @@ static void update_leaf(rad_hier *h, rad_elem *e, const float *x, void *ud)
 			e->I[c] = x[1 + c] + (e->I[c] - x[1 + c]) / (rm * x[0]);
 	for (int c = 0; c < 3; c++)
 		nb[c] = m->emit[c] + m->rho[c] * e->I[c];
-	acc->change +=
-	        rad_elem_area(h, e) * fabs(rad_luma(nb) - rad_luma(e->B));
-	acc->total += rad_elem_area(h, e) * rad_luma(nb);
+	acc->change += area * fabs(rad_luma(nb) - rad_luma(e->B));
+	acc->total += area * rad_luma(nb);
 	for (int c = 0; c < 3; c++) { /* the change: tail, statistics */
 		e->dB[c] = nb[c] - e->B[c];
-		acc->chg[c] += rad_elem_area(h, e) * fabs(e->dB[c]);
+		acc->chg[c] += area * fabs(e->dB[c]);
 	}
 	memcpy(e->B, nb, sizeof(nb));
 }

@@ -57,11 +57,10 @@ void node_B(const rad_hier *h, uint32_t t, double out[3])
 
 void node_exposed_emission(const rad_hier *h, uint32_t t, double b[3])
 {
-	const rad_elem *e = rad_elem_at(h, t);
-	if (e->exposed == RAD_EXPOSED_ALL)
+	if (rad_elem_exposed_raw(h, t) == RAD_EXPOSED_ALL)
 		return;
-	const float *E = h->scene->mats[h->scene->polys[e->poly].mat].emit;
-	double hidden = 1 - rad_elem_exposed(e);
+	const float *E = rad_elem_mat(h, t)->emit;
+	double hidden = 1 - rad_elem_exposed(h, t);
 	for (int c = 0; c < 3; c++)
 		b[c] -= hidden * E[c];
 }
@@ -70,7 +69,7 @@ double node_area_eff(const rad_hier *h, uint32_t t)
 {
 	if (node_is_cluster(t))
 		return rad_cluster_at(h, t)->area;
-	return rad_elem_area(h, rad_elem_at(h, t));
+	return rad_elem_area(h, t);
 }
 
 /* Projected area of cluster t towards unit direction u. */
@@ -92,7 +91,7 @@ int node_splittable(const rad_hier *h, uint32_t t)
 		return 0;
 	if (node_is_cluster(t))
 		return 1;
-	return rad_elem_can_split(h, rad_elem_at(h, t));
+	return rad_elem_can_split(h, t);
 }
 
 static v3 cluster_center(const rad_cluster *c)
@@ -113,7 +112,7 @@ double node_size(const rad_hier *h, uint32_t t)
 		return cluster_diag(rad_cluster_at(h, t));
 	if (node_is_light(t))
 		return 0;
-	return rad_elem_edge(h, rad_elem_at(h, t));
+	return rad_elem_edge(h, t);
 }
 
 /* An element's four quarters go to the same out[] as a leaf cluster's
@@ -426,7 +425,7 @@ double node_energy_scale(const rad_hier *h, int delta, const double got[3],
 		const rad_elem *e = rad_elem_at(h, i); /* pulled: the mean */
 		const float *b = delta ? e->dB : e->B;
 		for (int c = 0; c < 3; c++)
-			sent[c] += (double)rad_elem_area(h, e) * b[c];
+			sent[c] += (double)rad_elem_area(h, i) * b[c];
 	}
 	for (int c = 0; c < 3; c++) {
 		k[c] = got[c] > sent[c] && got[c] > 0 ? sent[c] / got[c] : 1;
@@ -476,7 +475,7 @@ double node_tail_add(rad_hier *h, const double q[3])
 	rad_hier_pull(h);
 	for (uint32_t i = 0; i < h->scene->npolys; i++) {
 		const rad_elem *e = rad_elem_at(h, i); /* pulled: the mean */
-		sum += rad_elem_area(h, e) * rad_luma(e->B);
+		sum += rad_elem_area(h, i) * rad_luma(e->B);
 	}
 	return sum / h->scene->total_area;
 }
@@ -509,9 +508,9 @@ static double ff_light_cluster(const rad_solver *sv, const rad_light *L,
  */
 static double rcv_cover(const rad_hier *h, uint32_t rcv, double *exposed)
 {
-	const rad_elem *e = rad_elem_at(h, rcv);
-	*exposed = rad_elem_exposed(e);
-	return h->scene->vis ? rad_hier_cover_dist(h, e->poly) : 0;
+	*exposed = rad_elem_exposed(h, rcv);
+	return h->scene->vis ? rad_hier_cover_dist(h, rad_elem_poly(h, rcv))
+	                     : 0;
 }
 
 /*
@@ -527,7 +526,7 @@ static double rcv_rows(const rad_hier *h, uint32_t rcv, const v3 *xs,
 		return rad_ff_rcv_mean(NULL, v3_make(0, 0, 0), NULL, rows, n, 0,
 		                       NULL, NULL);
 	double ex, cover = rcv_cover(h, rcv, &ex);
-	v3 nr = v3_f(h->scene->polys[rad_elem_at(h, rcv)->poly].n);
+	v3 nr = v3_f(h->scene->polys[rad_elem_poly(h, rcv)].n);
 	double f = rad_ff_rcv_mean(h->scene->vis, nr, xs, rows, n, cover, rays,
 	                           spread);
 	*spread *= ex;
@@ -553,7 +552,7 @@ static double ff_iso(const rad_solver *sv, uint32_t rcv, uint32_t src,
 	int mr = node_points(h, rcv, sv->opt.rcv_samples, 0, x, nx, NULL);
 	int ms = node_points(h, src, sv->opt.vis_samples, 1, y, ny, rays);
 	int rsurf = !node_is_cluster(rcv), ssurf = !node_is_cluster(src);
-	double as = ssurf ? rad_elem_area(h, rad_elem_at(h, src)) : 0;
+	double as = ssurf ? rad_elem_area(h, src) : 0;
 	double rows[RAD_FF_MAX_SAMPLES];
 	int used = 0;
 	*spread = 0;
@@ -661,10 +660,9 @@ double node_ff(const rad_solver *sv, uint32_t rcv, uint32_t src, uint64_t *rays,
 		return ff_iso(sv, rcv, src, rays, spread);
 	elem_patch(h, rcv, &pr);
 	elem_patch(h, src, &ps);
-	const rad_elem *es = rad_elem_at(h, src);
-	double cover = es->exposed == RAD_EXPOSED_ALL
+	double cover = rad_elem_exposed_raw(h, src) == RAD_EXPOSED_ALL
 	                       ? 0
-	                       : rad_hier_cover_dist(h, es->poly);
+	                       : rad_hier_cover_dist(h, rad_elem_poly(h, src));
 	double rcover = rcv_cover(h, rcv, &ex);
 	f = rad_ff_patch_spread(sv->scene->vis, &pr, &ps, sv->opt.rcv_samples,
 	                        sv->opt.vis_samples, cover, rcover, rays,
@@ -765,9 +763,8 @@ double node_ff_bound(const rad_hier *h, uint32_t rcv, uint32_t src)
 	if (node_is_light(src))
 		return light_ff_bound(h, rcv, src);
 	double d2 = node_gap2(h, rcv, src);
-	double as = node_is_cluster(src)
-	                    ? rad_cluster_at(h, src)->area
-	                    : rad_elem_area(h, rad_elem_at(h, src));
+	double as = node_is_cluster(src) ? rad_cluster_at(h, src)->area
+	                                 : rad_elem_area(h, src);
 	double f = as / (M_PI * d2);
 	return d2 > 0 && f < 1 ? f : 1;
 }
@@ -807,7 +804,7 @@ double node_area(const rad_hier *h, uint32_t t)
 		return 0;
 	if (node_is_cluster(t))
 		return rad_cluster_at(h, t)->area;
-	return rad_elem_area(h, rad_elem_at(h, t));
+	return rad_elem_area(h, t);
 }
 
 void node_stat_exchange(const rad_solver *sv, rad_stats *S, uint32_t r,

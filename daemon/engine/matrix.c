@@ -95,7 +95,7 @@ static double predicted_leaves(const rad_hier *h, double edge)
 {
 	double total = 0;
 	for (uint32_t i = 0; i < h->scene->npolys; i++) {
-		double len = rad_elem_edge(h, rad_elem_at(h, i)), leaves = 1;
+		double len = rad_elem_edge(h, i), leaves = 1;
 		while (len > edge && len > h->min_edge && leaves < 1e12) {
 			len *= 0.5;
 			leaves *= 4;
@@ -266,10 +266,8 @@ static rad_status matrix_init(rad_solver *sv, rad_error *err)
 		st = rad_fail(err, RAD_ERR_NOMEM,
 		              "matrix solver: build scratch");
 	} else {
-		for (uint32_t i = 0; i < n; i++) {
-			const rad_elem *e = rad_elem_at(&sv->h, m->leaf[i]);
-			rad_elem_patch(&sv->h, e, &patch[i]);
-		}
+		for (uint32_t i = 0; i < n; i++)
+			rad_elem_patch(&sv->h, m->leaf[i], &patch[i]);
 		st = build_matrix(sv, m, patch, count, err);
 	}
 	rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, patch);
@@ -298,7 +296,7 @@ static void sweep(rad_solver *sv, matrix_impl *m, double *change, double *level)
 			g[2] += row[j] * Bj[2];
 		}
 		rad_elem *e = rad_elem_at(h, m->leaf[i]);
-		const rad_material *mat = rad_elem_mat(h, e);
+		const rad_material *mat = rad_elem_mat(h, m->leaf[i]);
 		double *Bi = m->B + 3 * (size_t)i;
 		float dB[3], Bf[3];
 		for (int k = 0; k < 3; k++) {
@@ -310,8 +308,8 @@ static void sweep(rad_solver *sv, matrix_impl *m, double *change, double *level)
 			e->B[k] = (float)B;
 			e->I[k] = (float)I;
 		}
-		*change += rad_elem_area(h, e) * fabs(rad_luma(dB));
-		*level += rad_elem_area(h, e) * rad_luma(Bf);
+		*change += rad_elem_area(h, m->leaf[i]) * fabs(rad_luma(dB));
+		*level += rad_elem_area(h, m->leaf[i]) * rad_luma(Bf);
 	}
 }
 

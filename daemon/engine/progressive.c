@@ -182,7 +182,7 @@ static rad_status prog_init(rad_solver *sv, rad_error *err)
 		leaf_ids(h, i, p->patch, &n);
 	double rho = 0, emitted = 0;
 	for (uint32_t i = 0; i < np; i++) {
-		const rad_elem *e = rad_elem_at(h, p->patch[i]);
+		uint32_t e = p->patch[i];
 		const rad_material *m = rad_elem_mat(h, e);
 		for (int k = 0; k < 3; k++)
 			p->unshot[3 * i + k] = m->emit[k];
@@ -205,7 +205,7 @@ static rad_status prog_init(rad_solver *sv, rad_error *err)
 static double would_shoot(const rad_solver *sv, const prog_impl *p, uint32_t i,
                           const double amb[3], double dB[3])
 {
-	const rad_elem *e = rad_elem_at(&sv->h, p->patch[i]);
+	uint32_t e = p->patch[i];
 	const rad_material *m = rad_elem_mat(&sv->h, e);
 	for (int k = 0; k < 3; k++)
 		dB[k] = p->unshot[3 * (size_t)i + k] + m->rho[k] * amb[k];
@@ -218,8 +218,7 @@ static void ambient(const rad_solver *sv, const prog_impl *p, double amb[3])
 {
 	double sum[3] = {0, 0, 0};
 	for (uint32_t i = 0; i < p->npatch; i++) {
-		double a =
-		        rad_elem_area(&sv->h, rad_elem_at(&sv->h, p->patch[i]));
+		double a = rad_elem_area(&sv->h, p->patch[i]);
 		for (int k = 0; k < 3; k++)
 			sum[k] += a * p->unshot[3 * i + k];
 	}
@@ -231,10 +230,10 @@ static void ambient(const rad_solver *sv, const prog_impl *p, double amb[3])
 static void patch_source(const rad_solver *sv, const prog_impl *p, uint32_t i,
                          const double amb[3], shooter *s)
 {
-	const rad_elem *e = rad_elem_at(&sv->h, p->patch[i]);
+	uint32_t e = p->patch[i];
 	s->light = RAD_NONE;
 	s->patch = i;
-	s->poly = e->poly;
+	s->poly = rad_elem_poly(&sv->h, e);
 	rad_elem_patch(&sv->h, e, &s->geom);
 	would_shoot(sv, p, i, amb, s->dB);
 	for (int k = 0; k < 3; k++)
@@ -349,8 +348,9 @@ static void eval_past(const shot *sh, rcv_item *it, const rad_patch *r,
 	}
 	for (uint32_t j = 0; j < sh->p->npatch; j++) {
 		const double *S = sh->p->shot + 3 * (size_t)j;
-		const rad_elem *e = rad_elem_at(&sv->h, sh->p->patch[j]);
-		if (e->poly == poly || (S[0] == 0 && S[1] == 0 && S[2] == 0))
+		uint32_t e = sh->p->patch[j];
+		if (rad_elem_poly(&sv->h, e) == poly ||
+		    (S[0] == 0 && S[1] == 0 && S[2] == 0))
 			continue;
 		rad_patch g;
 		rad_elem_patch(&sv->h, e, &g);
@@ -370,12 +370,12 @@ static void eval_item(const shot *sh, rcv_item *it)
 {
 	const rad_solver *sv = sh->sv;
 	const rad_scene *s = sv->scene;
-	const rad_elem *e = rad_elem_at(&sv->h, it->elem);
+	uint32_t poly = rad_elem_poly(&sv->h, it->elem);
 	int nrcv = rcv_points(sv);
 	rad_patch r;
-	rad_elem_patch(&sv->h, e, &r);
+	rad_elem_patch(&sv->h, it->elem, &r);
 	if (it->fresh)
-		eval_past(sh, it, &r, e->poly);
+		eval_past(sh, it, &r, poly);
 	for (uint32_t i = 0; i < sh->nsrc; i++) {
 		const shooter *src = &sh->src[i];
 		const double *amount = src->dB;
@@ -385,7 +385,7 @@ static void eval_item(const shot *sh, rcv_item *it)
 			amount = L->intensity;
 			f = rad_light_patch_spread(s->vis, L, &r, nrcv, 0,
 			                           &it->rays, &spread);
-		} else if (src->poly != e->poly) { /* coplanar: nothing */
+		} else if (src->poly != poly) { /* coplanar: nothing */
 			f = rad_ff_patch_spread(s->vis, &r, &src->geom, nrcv,
 			                        sv->opt.vis_samples, 0, 0,
 			                        &it->rays, &spread);
@@ -433,9 +433,8 @@ static rad_status eval_first_round(rad_solver *sv, shot *sh, size_t n,
 
 static int wants_split(const rad_hier *h, const rcv_item *it, double limit)
 {
-	const rad_elem *e = rad_elem_at(h, it->elem);
-	return it->spread * rad_elem_area(h, e) > limit &&
-	       rad_elem_can_split(h, e);
+	return it->spread * rad_elem_area(h, it->elem) > limit &&
+	       rad_elem_can_split(h, it->elem);
 }
 
 /* A fresh leaf takes its gathered past; what it holds beyond its share
@@ -444,10 +443,9 @@ static void adopt_past(rad_solver *sv, prog_impl *p, const rcv_item *it)
 {
 	rad_elem *e = rad_elem_at(&sv->h, it->elem);
 	const rad_elem *parent = rad_elem_at(&sv->h, it->parent);
-	const rad_material *m = rad_elem_mat(&sv->h, e);
-	double w =
-	        rad_elem_area(&sv->h, e) /
-	        rad_elem_area(&sv->h, rad_elem_at(&sv->h, p->patch[it->patch]));
+	const rad_material *m = rad_elem_mat(&sv->h, it->elem);
+	double w = rad_elem_area(&sv->h, it->elem) /
+	           rad_elem_area(&sv->h, p->patch[it->patch]);
 	double *U = p->unshot + 3 * (size_t)it->patch;
 	for (int k = 0; k < 3; k++) {
 		U[k] += m->rho[k] * (it->past[k] - parent->I[k]) * w;
@@ -461,10 +459,9 @@ static void adopt_past(rad_solver *sv, prog_impl *p, const rcv_item *it)
 static void apply(rad_solver *sv, prog_impl *p, const rcv_item *it)
 {
 	rad_elem *e = rad_elem_at(&sv->h, it->elem);
-	const rad_material *m = rad_elem_mat(&sv->h, e);
-	double w =
-	        rad_elem_area(&sv->h, e) /
-	        rad_elem_area(&sv->h, rad_elem_at(&sv->h, p->patch[it->patch]));
+	const rad_material *m = rad_elem_mat(&sv->h, it->elem);
+	double w = rad_elem_area(&sv->h, it->elem) /
+	           rad_elem_area(&sv->h, p->patch[it->patch]);
 	double *U = p->unshot + 3 * (size_t)it->patch;
 	for (int k = 0; k < 3; k++) {
 		double I = e->I[k] + it->dI[k];
@@ -472,7 +469,7 @@ static void apply(rad_solver *sv, prog_impl *p, const rcv_item *it)
 		e->B[k] = (float)(m->emit[k] + m->rho[k] * I);
 		U[k] += m->rho[k] * it->dI[k] * w;
 	}
-	p->flux_received += rad_luma3(it->dI) * rad_elem_area(&sv->h, e);
+	p->flux_received += rad_luma3(it->dI) * rad_elem_area(&sv->h, it->elem);
 }
 
 /*

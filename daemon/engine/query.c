@@ -89,12 +89,13 @@ static int far_enough(const gather *g, double size, double dist, double bound)
 
 /* Photopic reflected radiosity B - E of an element's exposed part: the
  * point's rays to its covered part are blocked (hier.h, Covered parts). */
-static double reflected(const rad_elem *e, const float E[3])
+static double reflected(const rad_hier *h, uint32_t id, const float E[3])
 {
+	const rad_elem *e = rad_elem_at(h, id);
 	float R[3] = {e->B[0] - E[0], e->B[1] - E[1], e->B[2] - E[2]};
-	if (e->exposed == 0)
+	if (rad_elem_exposed_raw(h, id) == 0)
 		return 0;
-	return rad_luma(R) / rad_elem_exposed(e);
+	return rad_luma(R) / rad_elem_exposed(h, id);
 }
 
 /*
@@ -116,17 +117,16 @@ static region quarter(const region *r, int quad, int k)
 	return q;
 }
 
-static double children_rf(const gather *g, const rad_elem *e, const region *re,
-                          const float E[3])
+static double children_rf(const gather *g, const rad_elem *e, int quad,
+                          const region *re, const float E[3])
 {
 	double rf = 0;
-	int quad = rad_elem_quad(g->h, e);
 	for (uint32_t k = 0; k < 4; k++) {
-		const rad_elem *c = rad_elem_at(g->h, e->child + k);
 		region rc = quarter(re, quad, (int)k);
 		rad_patch q;
 		rad_patch_from_floats(&q, rc.p0, rc.e1, rc.e2, quad);
-		rf += reflected(c, E) * rad_ff_point_patch(g->x, g->n, &q);
+		rf += reflected(g->h, e->child + k, E) *
+		      rad_ff_point_patch(g->x, g->n, &q);
 	}
 	return rf;
 }
@@ -147,8 +147,8 @@ static double children_rf(const gather *g, const rad_elem *e, const region *re,
  * under hr.  Points behind x's tangent plane are not tried; none tried,
  * the leaf counts as seen as far as it is exposed.
  */
-static double covered_ff(gather *g, const rad_elem *e, const rad_patch *p,
-                         double F, double r)
+static double covered_ff(gather *g, uint32_t id, const rad_patch *p, double F,
+                         double r)
 {
 	v3 y[RAD_COVER_SAMPLES];
 	int n = rad_patch_scatter(p, RAD_COVER_SAMPLES, y), tried = 0, open = 0;
@@ -158,7 +158,7 @@ static double covered_ff(gather *g, const rad_elem *e, const rad_patch *p,
 		tried++;
 		open += rad_vis_segment(g->vis, g->x, &g->n, y[k], &p->n);
 	}
-	double v = tried ? (double)open / tried : rad_elem_exposed(e);
+	double v = tried ? (double)open / tried : rad_elem_exposed(g->h, id);
 	add_error(g, query_piece_error(r * F, v, tried ? tried : 1));
 	return F * v;
 }
@@ -244,11 +244,12 @@ static void gather_elem(gather *g, uint32_t id, const region *re,
                         const float E[3], double rp, ray_memo *memo)
 {
 	const rad_elem *e = rad_elem_at(g->h, id);
-	double r = reflected(e, E);
+	double r = reflected(g->h, id, E);
 	/* On a black emitter B - E is only the rounding of the pull. */
 	if (r <= NOISE_REL * rad_luma(E))
 		return;
-	int quad = rad_elem_quad(g->h, e);
+	int quad = rad_elem_quad(g->h, id);
+	int whole = rad_elem_exposed_raw(g->h, id) == RAD_EXPOSED_ALL;
 	rad_patch p;
 	rad_patch_from_floats(&p, re->p0, re->e1, re->e2, quad);
 	/* The kernel is additive over a partition: F = 0 here means nothing
@@ -257,9 +258,8 @@ static void gather_elem(gather *g, uint32_t id, const region *re,
 	if (F <= 0)
 		return;
 	if (e->child == RAD_NONE) {
-		double fv = e->exposed == RAD_EXPOSED_ALL
-		                    ? query_visible_ff(g, &p, F, r, memo)
-		                    : covered_ff(g, e, &p, F, r);
+		double fv = whole ? query_visible_ff(g, &p, F, r, memo)
+		                  : covered_ff(g, id, &p, F, r);
 		g->total += r * fv;
 		if (rp < 0)
 			return;
@@ -272,8 +272,7 @@ static void gather_elem(gather *g, uint32_t id, const region *re,
 		return;
 	}
 	double d = v3_len(v3_sub(rad_patch_centroid(&p), g->x));
-	if (e->exposed != RAD_EXPOSED_ALL ||
-	    !far_enough(g, query_patch_size(&p), d, r * F)) {
+	if (!whole || !far_enough(g, query_patch_size(&p), d, r * F)) {
 		ray_memo kids;
 		kids.n = 0;
 		for (uint32_t k = 0; k < 4; k++) {
@@ -283,7 +282,7 @@ static void gather_elem(gather *g, uint32_t id, const region *re,
 		return;
 	}
 	/* The children's weighting rf / F is the piece's radiosity weight. */
-	double rf = children_rf(g, e, re, E);
+	double rf = children_rf(g, e, quad, re, E);
 	if (!(rf > 0))
 		return;
 	double v = query_visible_ff(g, &p, F, rf / F, memo) / F;
@@ -592,7 +591,7 @@ static void leaves_below(const rad_hier *h, uint32_t id, rad_leaf_fn fn,
 	rad_patch p;
 	v3 v[4];
 	double pos[4][3] = {{0}};
-	rad_elem_patch(h, e, &p);
+	rad_elem_patch(h, id, &p);
 	int nv = rad_patch_vertices(&p, v);
 	for (int k = 0; k < nv; k++) {
 		pos[k][0] = v[k].x;
@@ -601,7 +600,7 @@ static void leaves_below(const rad_hier *h, uint32_t id, rad_leaf_fn fn,
 	}
 	double B[3] = {e->B[0], e->B[1], e->B[2]};
 	double I[3] = {e->I[0], e->I[1], e->I[2]};
-	fn(ud, h->scene->polys[e->poly].node, pos, nv, B, I);
+	fn(ud, h->scene->polys[rad_elem_poly(h, id)].node, pos, nv, B, I);
 }
 
 void rad_query_leaves(const rad_hier *h, rad_leaf_fn fn, void *ud)

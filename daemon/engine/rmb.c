@@ -71,7 +71,7 @@ static void node_power(const rad_hier *h, uint32_t id, double P[3])
 {
 	const rad_elem *e = rad_elem_at(h, id);
 	for (int c = 0; c < 3; c++)
-		P[c] += (double)rad_elem_area(h, e) * e->I[c];
+		P[c] += (double)rad_elem_area(h, id) * e->I[c];
 	if (e->child != RAD_NONE)
 		for (uint32_t k = 0; k < 4; k++)
 			node_power(h, e->child + k, P);
@@ -129,11 +129,13 @@ static double energy_bound(rad_solver *sv)
 }
 
 /* A leaf's update: dB = rho I, B += dB. */
-static void update_leaf(rad_hier *h, rad_elem *e, const float *extra, void *ud)
+static void update_leaf(rad_hier *h, uint32_t id, rad_elem *e,
+                        const float *extra, void *ud)
 {
 	(void)extra;
 	push_acc *acc = ud;
-	const rad_material *m = rad_elem_mat(h, e);
+	const rad_material *m = rad_elem_mat(h, id);
+	float area = rad_elem_area(h, id);
 	float inc[3];
 	for (int c = 0; c < 3; c++) {
 		double d = m->rho[c] * e->I[c];
@@ -144,15 +146,15 @@ static void update_leaf(rad_hier *h, rad_elem *e, const float *extra, void *ud)
 		                : (float)d;
 		e->dB[c] = (float)d;
 		e->B[c] += inc[c];
-		acc->chg[c] += rad_elem_area(h, e) * fabs(d);
+		acc->chg[c] += area * fabs(d);
 		/* Leaves report the total irradiance, not the increment
 		 * (a black leaf gathers nothing: it keeps the last one). */
 		if (m->rho[c] > 0)
 			e->I[c] = (e->B[c] - m->emit[c]) / m->rho[c];
 	}
-	acc->change += rad_elem_area(h, e) * fabs(rad_luma(inc));
-	acc->shot += rad_elem_area(h, e) * fabs(rad_luma(e->dB));
-	acc->total += rad_elem_area(h, e) * rad_luma(e->B);
+	acc->change += area * fabs(rad_luma(inc));
+	acc->shot += area * fabs(rad_luma(e->dB));
+	acc->total += area * rad_luma(e->B);
 }
 
 /*

@@ -20,8 +20,7 @@ int rmb_node_black(const rad_solver *sv, uint32_t t)
 		return 1;
 	if (node_is_cluster(t))
 		return st->black[node_index(t)];
-	const rad_elem *e = rad_elem_at(&sv->h, t);
-	const float *rho = rad_elem_mat(&sv->h, e)->rho;
+	const float *rho = rad_elem_mat(&sv->h, t)->rho;
 	return rho[0] == 0 && rho[1] == 0 && rho[2] == 0;
 }
 
@@ -35,7 +34,7 @@ double rmb_node_arefl(const rad_solver *sv, uint32_t t)
 
 static double elem_rho_max(const rad_solver *sv, uint32_t id)
 {
-	const float *rho = rad_elem_mat(&sv->h, rad_elem_at(&sv->h, id))->rho;
+	const float *rho = rad_elem_mat(&sv->h, id)->rho;
 	return fmax(rho[0], fmax(rho[1], rho[2]));
 }
 

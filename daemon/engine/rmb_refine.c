@@ -717,8 +717,7 @@ static rad_status mark_cuts(rad_solver *sv, rmb_state *st, uint32_t id,
 {
 	double mine = id < st->cap_err ? st->err[id] : 0;
 	double tot = above + mine;
-	rad_elem *e = rad_elem_at(&sv->h, id);
-	if (tot > 1 && mine > 0 && rad_elem_can_split(&sv->h, e)) {
+	if (tot > 1 && mine > 0 && rad_elem_can_split(&sv->h, id)) {
 		if (cover(sv, RAD_MEM_ELEM_SURFACE, &st->cut, &st->cap_cut, id))
 			return RAD_ERR_NOMEM;
 		/* The links of half the largest error or more (a quarter of
@@ -728,6 +727,7 @@ static rad_status mark_cuts(rad_solver *sv, rmb_state *st, uint32_t id,
 		if (st->cut[id] == 0 || c < st->cut[id])
 			st->cut[id] = c;
 	}
+	const rad_elem *e = rad_elem_at(&sv->h, id);
 	if (e->child == RAD_NONE)
 		return RAD_OK;
 	for (uint32_t k = 0; k < 4; k++) {

@@ -15,15 +15,16 @@
  *
  * Bytes: a fixed header (magic, format version, record sizes, counts, the
  * iteration, a digest of the scene's polygons) then the element records,
- * the cluster records, the inner clusters' records (moment model, dB,
- * ndB; one per child pair: the pairs are clusters 1-2, 3-4, ...) and the
- * cluster order, in the machine's byte order (checkpoints are read back
- * by the daemon that wrote them).  As for scenes and solvers, the struct
- * itself is plain calloc, not counted.  Loading trusts nothing: sizes
- * must match exactly, every id must be in range, every record must be
- * reached exactly once from the roots (no cycles, no sharing), and every
- * value must be finite, so a damaged or foreign file is refused with a
- * message instead of crashing a later query.
+ * their sibling runs' records (one per 4 elements past the roots: runs
+ * start at npolys here), the roots' exposed fractions, the cluster records, the
+ * inner clusters' records (moment model, dB, ndB; one per child pair: the pairs
+ * are clusters 1-2, 3-4, ...) and the cluster order, in the machine's byte
+ * order (checkpoints are read back by the daemon that wrote them).  As for
+ * scenes and solvers, the struct itself is plain calloc, not counted.  Loading
+ * trusts nothing: sizes must match exactly, every id must be in range, every
+ * record must be reached exactly once from the roots (no cycles, no sharing),
+ * and every value must be finite, so a damaged or foreign file is refused with
+ * a message instead of crashing a later query.
  */
 #include <math.h>
 #include <stdlib.h>
@@ -40,7 +41,10 @@
 	     * their region (hier.h, Regions); 6: clusters no parent; 7: nor   \
 	     * elements; 8: the moments of inner clusters only, after the      \
 	     * cluster records; 9: no list heads in elements and clusters;     \
-	     * 10: dB and ndB with the moments, inner clusters only */
+	     * 10: dB and ndB with the moments, inner clusters only;           \
+	     * 11: polygon, depth, path and exposed fraction in a record per   \
+	     * sibling run and the roots' exposed fractions, after the         \
+	     * elements (hier.h, Runs) */
 
 struct rad_solution {
 	const rad_scene *scene;
@@ -109,6 +113,9 @@ static rad_solution *solution_alloc(const rad_scene *scene)
 	s->h.mem = &s->mem;
 	rad_pool_init(&s->h.elems, &s->mem, RAD_MEM_SOLUTION, sizeof(rad_elem),
 	              0, 1);
+	rad_pool_init(&s->h.runs, &s->mem, RAD_MEM_SOLUTION,
+	              sizeof(rad_elem_run), 0, 1);
+	s->h.run0 = scene->npolys;
 	rad_pool_init(&s->h.clusters, &s->mem, RAD_MEM_SOLUTION,
 	              sizeof(rad_cluster), 0, 1);
 	rad_pool_init(&s->h.links, &s->mem, RAD_MEM_SOLUTION, sizeof(rad_link),
@@ -121,6 +128,8 @@ void rad_solution_free(rad_solution *s)
 	if (!s)
 		return;
 	rad_pool_destroy(&s->h.elems);
+	rad_pool_destroy(&s->h.runs);
+	rad_mem_free(&s->mem, RAD_MEM_SOLUTION, s->h.root_exposed);
 	rad_pool_destroy(&s->h.clusters);
 	rad_mem_free(&s->mem, RAD_MEM_SOLUTION, s->h.order);
 	rad_mem_free(&s->mem, RAD_MEM_SOLUTION, s->h.inner);
@@ -159,8 +168,10 @@ static uint32_t copy_elems(const rad_hier *src, rad_hier *dst)
 	uint32_t leaves = 0;
 	uint32_t np = src->scene->npolys, next = np;
 	rad_elem *out = (rad_elem *)dst->elems.block[0];
+	rad_elem_run *runs = (rad_elem_run *)dst->runs.block[0];
 	for (uint32_t p = 0; p < np; p++)
 		out[p] = *rad_elem_at(src, p);
+	memcpy(dst->root_exposed, src->root_exposed, np);
 	for (uint32_t i = 0; i < next; i++) {
 		rad_elem *e = &out[i];
 		if (e->child == RAD_NONE) {
@@ -170,6 +181,7 @@ static uint32_t copy_elems(const rad_hier *src, rad_hier *dst)
 		uint32_t first = next;
 		for (uint32_t k = 0; k < 4; k++)
 			out[first + k] = *rad_elem_at(src, e->child + k);
+		runs[(first - np) / 4] = *rad_elem_run_of(src, e->child);
 		e->child = first;
 		next += 4;
 	}
@@ -194,6 +206,13 @@ static void copy_clusters(const rad_hier *src, rad_hier *dst)
 		dst->inner[rad_cluster_inner_index(c)] = *mo;
 		next += 2;
 	}
+}
+
+/* The sibling runs of a solution's elements: 4 elements each past the
+ * roots (check_header has checked the count divides). */
+static uint32_t sol_nruns(const sol_header *hd)
+{
+	return hd->npolys ? (hd->nelems - hd->npolys) / 4 : 0;
 }
 
 /* The models of a solution's nc clusters: one per child pair. */
@@ -236,6 +255,10 @@ rad_status rad_solution_new(const rad_solver *sv, rad_solution **out,
 			ne += count_below(src, p);
 		if (pool_one_block(&s->h.elems, &s->mem, sizeof(rad_elem),
 		                   ne) ||
+		    pool_one_block(&s->h.runs, &s->mem, sizeof(rad_elem_run),
+		                   (ne - np) / 4) ||
+		    !(s->h.root_exposed =
+		              rad_mem_alloc(&s->mem, RAD_MEM_SOLUTION, np)) ||
 		    pool_one_block(&s->h.clusters, &s->mem, sizeof(rad_cluster),
 		                   nc) ||
 		    alloc_inner(s, nc) ||
@@ -323,21 +346,26 @@ rad_status rad_solution_save(const rad_solution *s, unsigned char **out,
 	                 s->iteration,
 	                 scene_digest(s->scene)};
 	size_t be = (size_t)hd.nelems * sizeof(rad_elem);
+	size_t br = (size_t)sol_nruns(&hd) * sizeof(rad_elem_run);
+	size_t bx = np;
 	size_t bc = (size_t)hd.nclusters * sizeof(rad_cluster);
 	size_t bm =
 	        (size_t)sol_ninner(hd.nclusters) * sizeof(rad_cluster_inner);
 	size_t bo = (size_t)hd.norder * sizeof(uint32_t);
-	size_t n = sizeof hd + be + bc + bm + bo;
+	size_t n = sizeof hd + be + br + bx + bc + bm + bo;
 	unsigned char *b = malloc(n);
 	if (!b)
 		return rad_fail(err, RAD_ERR_NOMEM,
 		                "solution save: out of memory (%zu bytes)", n);
 	memcpy(b, &hd, sizeof hd);
 	if (np) {
-		memcpy(b + sizeof hd, s->h.elems.block[0], be);
-		memcpy(b + sizeof hd + be, s->h.clusters.block[0], bc);
-		memcpy(b + sizeof hd + be + bc, s->h.inner, bm);
-		memcpy(b + sizeof hd + be + bc + bm, s->h.order, bo);
+		unsigned char *o = b + sizeof hd;
+		memcpy(o, s->h.elems.block[0], be), o += be;
+		memcpy(o, s->h.runs.block[0], br), o += br;
+		memcpy(o, s->h.root_exposed, bx), o += bx;
+		memcpy(o, s->h.clusters.block[0], bc), o += bc;
+		memcpy(o, s->h.inner, bm), o += bm;
+		memcpy(o, s->h.order, bo);
 	}
 	*out = b;
 	*len = n;
@@ -351,30 +379,26 @@ static int finite3(const float v[3])
 
 static int elem_ok(const rad_elem *e, uint32_t np, uint32_t ne)
 {
-	if (e->poly >= np ||
-	    (e->child != RAD_NONE &&
-	     (e->child < np || e->child >= ne || ne - e->child < 4)))
+	if (e->child != RAD_NONE &&
+	    (e->child < np || e->child >= ne || ne - e->child < 4 ||
+	     (e->child - np) % 4 != 0))
 		return 0;
 	return finite3(e->B) && finite3(e->I) && finite3(e->dB);
 }
 
 /*
  * An element's region is not data of its own (hier.h, Regions): a root is
- * its polygon, a child the quarter its path names.  Level and path are
- * checked, so that damage there (a path no split made, a depth past the
- * cap) is refused, not traced.
+ * its polygon, a child the quarter its path names.  A run's polygon,
+ * depth and path are checked against its parent's, so that damage there
+ * (a path no split made, a depth past the cap) is refused, not traced.
  */
-static int root_matches(const rad_elem *e)
+static int run_matches(const rad_hier *h, uint32_t parent,
+                       const rad_elem_run *r)
 {
-	return e->level == 0 && e->path == 0;
-}
-
-static int quarter_matches(const rad_elem *parent, uint32_t k,
-                           const rad_elem *e)
-{
-	return e->level == parent->level + 1 &&
-	       e->level <= RAD_ELEM_MAX_LEVEL &&
-	       e->path == (parent->path | k << (2 * parent->level));
+	return r->poly == rad_elem_poly(h, parent) &&
+	       r->level == rad_elem_level(h, parent) + 1 &&
+	       r->level <= RAD_ELEM_MAX_LEVEL &&
+	       r->path == rad_elem_path(h, parent);
 }
 
 /* Every element reached once from the roots, children of one polygon. */
@@ -387,16 +411,6 @@ static rad_status check_elems(rad_solution *s, uint32_t np, uint32_t ne,
 			return rad_fail(err, RAD_ERR_INVALID,
 			                "solution: element %u is damaged", i);
 	uint32_t reached = np, leaves = 0;
-	for (uint32_t i = 0; i < np; i++) {
-		if (a[i].poly != i)
-			return rad_fail(err, RAD_ERR_INVALID,
-			                "solution: root %u names polygon %u", i,
-			                a[i].poly);
-		if (!root_matches(&a[i]))
-			return rad_fail(
-			        err, RAD_ERR_INVALID,
-			        "solution: root %u has a level or a path", i);
-	}
 	/* Ids of children always exceed their parent's (breadth-first), so
 	 * one forward pass visits the forest. */
 	for (uint32_t i = 0; i < ne; i++) {
@@ -413,18 +427,20 @@ static rad_status check_elems(rad_solution *s, uint32_t np, uint32_t ne,
 			                "solution: element %u has an earlier "
 			                "child",
 			                i);
+		/* Parents come before their children: i's own run has
+		 * been checked when its polygon, depth and path are read. */
+		if (!run_matches(&s->h, i, rad_elem_run_of(&s->h, a[i].child)))
+			return rad_fail(err, RAD_ERR_INVALID,
+			                "solution: the children of element %u "
+			                "are not its quarters",
+			                i);
 		for (uint32_t k = 0; k < 4; k++) {
 			uint32_t c = a[i].child + k;
-			if (seen[c] || a[c].poly != a[i].poly)
+			if (seen[c])
 				return rad_fail(err, RAD_ERR_INVALID,
 				                "solution: element %u is "
-				                "shared or crosses polygons",
+				                "shared",
 				                c);
-			if (!quarter_matches(&a[i], k, &a[c]))
-				return rad_fail(err, RAD_ERR_INVALID,
-				                "solution: element %u is not "
-				                "quarter %u of element %u",
-				                c, k, i);
 			seen[c] = 1;
 			reached++;
 		}
@@ -510,11 +526,13 @@ static rad_status check_header(const sol_header *hd, const rad_scene *scene,
 	int empty = hd->npolys == 0;
 	if (empty ? (hd->nelems || hd->nclusters)
 	          : (hd->nelems < hd->npolys || hd->nclusters < 1 ||
-	             hd->nelems > UINT32_MAX / 2))
+	             hd->nelems > UINT32_MAX / 2 ||
+	             (hd->nelems - hd->npolys) % 4 != 0))
 		return rad_fail(err, RAD_ERR_INVALID,
 		                "solution: bad record counts");
 	size_t want =
 	        sizeof *hd + (size_t)hd->nelems * sizeof(rad_elem) +
+	        (size_t)sol_nruns(hd) * sizeof(rad_elem_run) + hd->npolys +
 	        (size_t)hd->nclusters * sizeof(rad_cluster) +
 	        (size_t)sol_ninner(hd->nclusters) * sizeof(rad_cluster_inner) +
 	        (size_t)hd->norder * sizeof(uint32_t);
@@ -553,12 +571,18 @@ rad_status rad_solution_load(const rad_scene *scene, const void *bytes,
 		const unsigned char *b =
 		        (const unsigned char *)bytes + sizeof hd;
 		size_t be = (size_t)hd.nelems * sizeof(rad_elem);
+		size_t br = (size_t)sol_nruns(&hd) * sizeof(rad_elem_run);
+		size_t bx = hd.npolys;
 		size_t bc = (size_t)hd.nclusters * sizeof(rad_cluster);
 		size_t bm = (size_t)sol_ninner(hd.nclusters) *
 		            sizeof(rad_cluster_inner);
 		unsigned char *seen = NULL;
 		if (pool_one_block(&s->h.elems, &s->mem, sizeof(rad_elem),
 		                   hd.nelems) ||
+		    pool_one_block(&s->h.runs, &s->mem, sizeof(rad_elem_run),
+		                   sol_nruns(&hd)) ||
+		    !(s->h.root_exposed =
+		              rad_mem_alloc(&s->mem, RAD_MEM_SOLUTION, bx)) ||
 		    pool_one_block(&s->h.clusters, &s->mem, sizeof(rad_cluster),
 		                   hd.nclusters) ||
 		    alloc_inner(s, hd.nclusters) ||
@@ -572,11 +596,12 @@ rad_status rad_solution_load(const rad_scene *scene, const void *bytes,
 			return rad_fail(err, RAD_ERR_NOMEM,
 			                "solution: out of memory");
 		}
-		memcpy(s->h.elems.block[0], b, be);
-		memcpy(s->h.clusters.block[0], b + be, bc);
-		memcpy(s->h.inner, b + be + bc, bm);
-		memcpy(s->h.order, b + be + bc + bm,
-		       hd.npolys * sizeof(uint32_t));
+		memcpy(s->h.elems.block[0], b, be), b += be;
+		memcpy(s->h.runs.block[0], b, br), b += br;
+		memcpy(s->h.root_exposed, b, bx), b += bx;
+		memcpy(s->h.clusters.block[0], b, bc), b += bc;
+		memcpy(s->h.inner, b, bm), b += bm;
+		memcpy(s->h.order, b, hd.npolys * sizeof(uint32_t));
 		st = check_elems(s, hd.npolys, hd.nelems, seen, err);
 		if (st == RAD_OK)
 			st = check_clusters(s, hd.npolys, hd.nclusters, seen,

@@ -91,7 +91,8 @@ rad_status rad_solver_new(const rad_scene *scene, const rad_options *opt,
 		         "its first step starts with (%u polygons: %.1f MiB "
 		         "for their root elements alone)",
 		         sv->ops->name, opt->memory_budget, scene->npolys,
-		         (double)scene->npolys * sizeof(rad_elem) / 1048576.0);
+		         (double)scene->npolys * (sizeof(rad_elem) + 1) /
+		                 1048576.0);
 	if (st) {
 		rad_solver_free(sv);
 		return st;
@@ -288,7 +289,7 @@ void rad_solver_stats(const rad_solver *sv, rad_stats *out)
 	if (out != &sv->stats)
 		*out = sv->stats;
 	out->eps = sv->opt.eps;
-	out->elements = rad_pool_live(&sv->h.elems);
+	out->elements = rad_hier_elements(&sv->h);
 	out->clusters = rad_pool_live(&sv->h.clusters);
 	out->leaves = sv->h.nleaves;
 	rad_mem_report_joint(&sv->mem, &out->mem);

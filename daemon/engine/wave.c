@@ -183,11 +183,12 @@ static int split_side(const rad_hier *h, uint32_t r, uint32_t s, int rcv_only)
 	return rs ? 1 : 2;
 }
 
-/* Bytes an element split takes: four elements, hr's list heads for
- * them, and the solver's scratch for them. */
+/* Bytes an element split takes: four elements, their run's record, hr's
+ * list heads for them, and the solver's scratch for them. */
 static size_t elem_split_bytes(const rad_hier *h, const rad_wave *w)
 {
-	return 4 * (sizeof(rad_elem) + (h->lists ? sizeof(uint32_t) : 0) +
+	return sizeof(rad_elem_run) +
+	       4 * (sizeof(rad_elem) + (h->lists ? sizeof(uint32_t) : 0) +
 	            w->elem_extra);
 }
 
@@ -473,18 +474,17 @@ int wave_room_split(const rad_solver *sv, const rad_wave *w, uint32_t r,
 rad_status wave_failed(const rad_solver *sv, rad_status rs, rad_error *err)
 {
 	if (sv->mem.budget && atomic_load(&sv->mem.budget_refusals))
-		return rad_fail(err, rs,
-		                "%s: the memory budget (%g MiB) is too small "
-		                "for this scene's coarsest links (%u elements, "
-		                "%u links held)",
-		                sv->ops->name,
-		                (double)sv->mem.budget / 1048576.0,
-		                rad_pool_live(&sv->h.elems),
-		                rad_pool_live(&sv->h.links));
+		return rad_fail(
+		        err, rs,
+		        "%s: the memory budget (%g MiB) is too small "
+		        "for this scene's coarsest links (%u elements, "
+		        "%u links held)",
+		        sv->ops->name, (double)sv->mem.budget / 1048576.0,
+		        rad_hier_elements(&sv->h), rad_pool_live(&sv->h.links));
 	return rad_fail(err, rs,
 	                "%s: refinement ran out of memory (%u elements, %u "
 	                "links)",
-	                sv->ops->name, rad_pool_live(&sv->h.elems),
+	                sv->ops->name, rad_hier_elements(&sv->h),
 	                rad_pool_live(&sv->h.links));
 }
 

@@ -380,16 +380,15 @@ static void test_elem_regions_derived(void **state)
 	rmb_hier(s, &mem, &h);
 	for (uint32_t root = 0; root < 2; root++) {
 		uint32_t id = root;
-		while (rad_elem_can_split(&h, rad_elem_at(&h, id))) {
+		while (rad_elem_can_split(&h, id)) {
 			uint32_t c = rad_elem_split(&h, id);
 			assert_int_not_equal(c, RAD_NONE);
-			const rad_elem *e = rad_elem_at(&h, id);
+			uint32_t e = id;
 			float p0[3], e1[3], e2[3];
 			rad_elem_region(&h, e, p0, e1, e2);
 			double sum = 0;
 			for (int k = 0; k < 4; k++) {
-				const rad_elem *ch =
-				        rad_elem_at(&h, c + (uint32_t)k);
+				uint32_t ch = c + (uint32_t)k;
 				float q0[3], q1[3], q2[3], r0[3], r1[3], r2[3];
 				memcpy(q0, p0, sizeof q0);
 				memcpy(q1, e1, sizeof q1);
@@ -408,14 +407,13 @@ static void test_elem_regions_derived(void **state)
 			}
 			assert_true(sum == rad_elem_area(&h, e));
 			/* Down a different quarter at each level. */
-			id = c + (uint32_t)(e->level % 4);
+			id = c + (uint32_t)(rad_elem_level(&h, e) % 4);
 		}
-		assert_int_equal(rad_elem_at(&h, id)->level,
-		                 RAD_ELEM_MAX_LEVEL);
+		assert_int_equal(rad_elem_level(&h, id), RAD_ELEM_MAX_LEVEL);
 	}
 	char msg[256];
 	assert_int_equal(rad_hier_check(&h, msg, sizeof(msg)), 0);
-	rad_elem *deep = rad_elem_at(&h, rad_elem_at(&h, 0)->child + 2);
+	rad_elem_run *deep = rad_elem_run_of(&h, rad_elem_at(&h, 0)->child + 2);
 	expect_planted(&h, &deep->path, "not its quarter");
 	rad_hier_destroy(&h);
 	rad_scene_free(s);
@@ -451,8 +449,8 @@ static void test_hier_invariants(void **state)
 					linked = i;
 			}
 			assert_true(split != RAD_NONE && linked != RAD_NONE);
-			rad_elem *ch =
-			        rad_elem_at(h, rad_elem_at(h, split)->child);
+			rad_elem_run *ch = rad_elem_run_of(
+			        h, rad_elem_at(h, split)->child);
 			rad_hlink *l =
 			        rad_hlink_at(h, *rad_node_links(h, linked));
 			expect_planted(h, &ch->poly, "disowns its parent");
@@ -482,7 +480,7 @@ static void test_solver_alloc_failure_is_clean(void **state)
 	 * the solve completes), nothing leaks (ASan checks), and the scene
 	 * is untouched. */
 	int completed = 0;
-	for (int64_t n = 0; n < 400 && !completed; n++) {
+	for (int64_t n = 0; n < 600 && !completed; n++) {
 		rad_options o;
 		rad_options_default(&o);
 		o.threads = 1;
@@ -911,7 +909,7 @@ static void cluster_sums(const rad_hier *h, const rad_cluster *c, double B[3],
 	for (uint32_t j = c->first; j < c->first + c->count; j++) {
 		const rad_elem *e = rad_elem_at(h, h->order[j]);
 		const float *n = h->scene->polys[h->order[j]].n;
-		double a = rad_elem_area(h, e);
+		double a = rad_elem_area(h, h->order[j]);
 		area += a;
 		for (int k = 0; k < 3; k++) {
 			B[k] += a * e->B[k];

@@ -227,6 +227,23 @@ static void test_solution_bad_bytes_refused(void **state)
 	memcpy(c + len - n.polygons * sizeof(uint32_t) - sizeof(float), &nan,
 	       sizeof nan);
 	expect_refused(s, c, len, "model is damaged");
+	/* The first sibling run's record (hier.h, Runs) follows the
+	 * elements: a header of ten uint32_t (the record size at 8, the
+	 * polygons at 16, the elements at 20) and a uint64_t, then the
+	 * elements; the run's path (4 bytes after its polygon) names a
+	 * quarter no split made. */
+	uint32_t esize, npolys, nelems;
+	memcpy(&esize, b + 8, sizeof esize);
+	memcpy(&npolys, b + 16, sizeof npolys);
+	memcpy(&nelems, b + 20, sizeof nelems);
+	assert_true(nelems > npolys); /* one step of hr splits some */
+	size_t run = 48 + (size_t)nelems * esize;
+	memcpy(c, b, len);
+	c[run + 4] ^= 1;
+	expect_refused(s, c, len, "are not its quarters");
+	memcpy(c, b, len);
+	c[run] ^= 1; /* its polygon */
+	expect_refused(s, c, len, "are not its quarters");
 	free(c);
 
 	/* Another scene (a box) with the Cornell box's bytes. */
