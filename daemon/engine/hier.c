@@ -422,8 +422,8 @@ static void no_links(uint32_t *heads, uint32_t n)
 static void init_pools(rad_hier *h, rad_mem *mem, uint32_t shift, uint32_t n,
                        int lists)
 {
-	rad_pool_init(&h->elems, mem, RAD_MEM_ELEM_SURFACE, sizeof(rad_elem),
-	              shift, n);
+	rad_pool_init(&h->elems, mem, RAD_MEM_ELEM_SURFACE,
+	              (uint32_t)rad_hier_elem_size(h->exact_dB), shift, n);
 	/* A run's record is 16 bytes: as many in a block as elements in
 	 * elems' (a quarter made the allocations of a small solve 13 % more
 	 * numerous). */
@@ -451,7 +451,7 @@ size_t rad_hier_grow_blocks(const rad_hier *h)
 }
 
 rad_status rad_hier_init(rad_hier *h, const rad_scene *s, rad_mem *mem,
-                         double min_edge, int lists, rad_par *par,
+                         double min_edge, int lists, int exact_dB, rad_par *par,
                          rad_error *err)
 {
 	static _Atomic uint64_t next_gen = 1;
@@ -468,6 +468,7 @@ rad_status rad_hier_init(rad_hier *h, const rad_scene *s, rad_mem *mem,
 	while (shift < 12 && (1u << shift) < n)
 		shift++;
 	h->lists = lists;
+	h->exact_dB = exact_dB;
 	init_pools(h, mem, shift, n, lists);
 	/* Under a memory budget a block of each pool that grows is kept free
 	 * (wave_room_for): together they take at most a 64th of it (a
@@ -661,11 +662,13 @@ uint32_t rad_elem_split(rad_hier *h, uint32_t id)
 	run->level = (uint8_t)(rad_elem_level(h, id) + 1);
 	run->path = rad_elem_path(h, id);
 	uint8_t exposed = rad_elem_exposed_raw(h, id);
+	float dB[3];
+	rad_elem_dB(h, e, dB);
 	for (uint32_t k = 0; k < 4; k++) {
 		rad_elem *ch = rad_elem_at(h, c + k);
 		ch->child = RAD_NONE;
 		memcpy(ch->B, e->B, sizeof(ch->B));
-		memcpy(ch->dB, e->dB, sizeof(ch->dB));
+		rad_elem_set_dB(h, ch, dB);
 		/* Every quarter measures its own: a parent's points can
 		 * miss a cover that a quarter straddles (hier.h). */
 		run->exposed[k] = exposed;
@@ -752,8 +755,10 @@ static void reset_tree(rad_hier *h, uint32_t id)
 	const rad_material *m = rad_elem_mat(h, id);
 	for (int c = 0; c < 3; c++) {
 		e->B[c] = m->emit[c];
-		e->I[c] = e->dB[c] = 0;
+		e->I[c] = 0;
 	}
+	static const float zero[3] = {0, 0, 0};
+	rad_elem_set_dB(h, e, zero);
 	if (e->child != RAD_NONE)
 		for (uint32_t k = 0; k < 4; k++)
 			reset_tree(h, e->child + k);
@@ -807,11 +812,14 @@ static void pull_elem(rad_hier *h, uint32_t id)
 	for (uint32_t k = 0; k < 4; k++) {
 		pull_elem(h, e->child + k);
 		const rad_elem *ch = rad_elem_at(h, e->child + k);
-		float a = rad_elem_area(h, e->child + k);
-		acc_node(acc, a, ch->B, ch->dB);
+		float a = rad_elem_area(h, e->child + k), dB[3];
+		rad_elem_dB(h, ch, dB);
+		acc_node(acc, a, ch->B, dB);
 		area += a;
 	}
-	set_avg(e->B, e->dB, acc, area);
+	float dB[3];
+	set_avg(e->B, dB, acc, area);
+	rad_elem_set_dB(h, e, dB);
 }
 
 /* B, dB (area averages) and nB, ndB of leaf cluster cl, summed from its
@@ -822,10 +830,11 @@ static void leaf_sums(const rad_hier *h, const rad_cluster *cl, double acc[6],
 	for (uint32_t j = cl->first; j < cl->first + cl->count; j++) {
 		const rad_elem *e = rad_elem_at(h, h->order[j]);
 		const float *n = h->scene->polys[h->order[j]].n;
-		float a = rad_elem_area(h, h->order[j]);
+		float a = rad_elem_area(h, h->order[j]), dB[3];
+		rad_elem_dB(h, e, dB);
 		double b = (double)a * rad_luma(e->B);
-		double d = (double)a * rad_luma(e->dB);
-		acc_node(acc, a, e->B, e->dB);
+		double d = (double)a * rad_luma(dB);
+		acc_node(acc, a, e->B, dB);
 		for (int c = 0; c < 3; c++) {
 			nb[c] += b * n[c];
 			nb[3 + c] += d * n[c];
@@ -849,13 +858,14 @@ void rad_cluster_delta(const rad_hier *h, const rad_cluster *cl, float dB[3],
 	double acc[3] = {0, 0, 0}, nb[3] = {0, 0, 0};
 	for (uint32_t j = cl->first; j < cl->first + cl->count; j++) {
 		const rad_elem *e = rad_elem_at(h, h->order[j]);
-		float a = rad_elem_area(h, h->order[j]);
+		float a = rad_elem_area(h, h->order[j]), eB[3];
+		rad_elem_dB(h, e, eB);
 		for (int c = 0; c < 3; c++)
-			acc[c] += (double)a * e->dB[c];
+			acc[c] += (double)a * eB[c];
 		if (!ndB)
 			continue;
 		const float *n = h->scene->polys[h->order[j]].n;
-		double d = (double)a * rad_luma(e->dB);
+		double d = (double)a * rad_luma(eB);
 		for (int c = 0; c < 3; c++)
 			nb[c] += d * n[c];
 	}

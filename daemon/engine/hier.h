@@ -48,6 +48,20 @@
  *      solvers to use as "previous B" or "unshot radiosity".
  * Emission E and reflectance rho come from the polygon's material.
  *
+ * Increments.  Only rmb sends dB: every step's light leaves from it, and
+ * its tail jump reads the rate at which it shrinks, to 5e-5 at rho 0.999.
+ * hr reads it for its statistics and its tail alone (B + dB q / (1 - q)).
+ * So rmb's elements keep dB in three floats (records of
+ * RAD_ELEM_EXACT_SIZE, 40 bytes) and every other solver's in 32 bits
+ * (rad_shared3: a shared exponent, 7-bit signed mantissas), which makes
+ * an element 32 bytes.  Packed, rmb lost the jump: the increments of a
+ * closed box at rho 0.99 all round alike, their rate wanders by the
+ * rounding (up to 1/128), and it ran 330 steps to end 9.2 % low.  hr's
+ * tail takes the rounding of the dB it extrapolates: 313,808 lux
+ * against 313,996 in a closed box at rho 0.999 (exact 314,159).
+ * rad_elem_dB and rad_elem_set_dB read and write either form; a saved
+ * solution keeps the packed one.
+ *
  * Clusters are seen through their projected area (rad_cluster_proj).  The
  * area polygons i (areas A_i, unit normals n_i) show in direction d is
  *   P(d) = sum A_i max(0, n_i . d) = (N . d + Q(d)) / 2,
@@ -89,7 +103,7 @@
  * dB), where every field in it made 52: on the grand hall, whose
  * elements are nearly all roots, hr's 16.6 MB of elements became 13.3
  * MB (42 bytes an element with the runs, the roots' bytes and the
- * blocks' slack).
+ * blocks' slack).  Packing dB (Increments) makes it 32 but for rmb.
  * Covered parts.  Scenes lay panels, windows, luminaires and boards a
  * few millimetres in front of walls and ceilings.  The part of a surface
  * behind such a cover takes no light and sends none, and an element that
@@ -167,12 +181,14 @@
 #ifndef LUXRAD_HIER_H
 #define LUXRAD_HIER_H
 
+#include <stddef.h>
 #include <string.h>
 
 #include "ff.h"
 #include "mem.h"
 #include "par.h"
 #include "scene.h"
+#include "shared3.h"
 #include "vec.h"
 
 #define RAD_TAG_CLUSTER 0x80000000u
@@ -181,8 +197,10 @@
 #define RAD_CLUSTER_LEAF_MAX 4
 
 typedef struct rad_elem {
-	uint32_t child;          /* first of 4 children, RAD_NONE for a leaf */
-	float B[3], I[3], dB[3]; /* see DESIGN */
+	uint32_t child;   /* first of 4 children, RAD_NONE for a leaf */
+	float B[3], I[3]; /* see DESIGN */
+	rad_shared3 dB;   /* see DESIGN; read and write it with rad_elem_dB
+	                     and rad_elem_set_dB (Increments) */
 } rad_elem;
 
 /* What the four children of one split share, and what each measured of
@@ -261,7 +279,9 @@ typedef struct rad_hlink {
 } rad_hlink;
 
 /* Sizes the memory study measures by (Regions; links above). */
-_Static_assert(sizeof(rad_elem) == 40, "rad_elem grew");
+_Static_assert(sizeof(rad_elem) == 32, "rad_elem grew");
+/* A record with dB in floats (Increments): the field and 8 bytes more. */
+#define RAD_ELEM_EXACT_SIZE (sizeof(rad_elem) + 2 * sizeof(float))
 _Static_assert(sizeof(rad_elem_run) == 16, "rad_elem_run grew");
 _Static_assert(sizeof(rad_link) == 16, "rad_link grew");
 _Static_assert(sizeof(rad_link_ext) == 12, "rad_link_ext grew");
@@ -284,6 +304,7 @@ typedef struct rad_hier {
 	 * same ids), clusters' an array.  Without lists (other solvers)
 	 * both are empty. */
 	int lists;
+	int exact_dB; /* elements keep dB in floats (Increments) */
 	rad_pool heads;
 	uint32_t *cluster_heads;
 	uint32_t *order; /* polygon ids in cluster order, ELEM_CLUSTER */
@@ -333,6 +354,28 @@ static inline uint8_t rad_elem_exposed_raw(const rad_hier *h, uint32_t id)
 	return id < h->run0
 	               ? h->root_exposed[id]
 	               : rad_elem_run_of(h, id)->exposed[(id - h->run0) & 3u];
+}
+/* Element e's dB (Increments): three floats from the field on, in
+ * records of RAD_ELEM_EXACT_SIZE bytes, or packed in it.  The floats are
+ * reached through the record's bytes, which run past the struct. */
+#define RAD_ELEM_DB_AT offsetof(rad_elem, dB)
+static inline void rad_elem_dB(const rad_hier *h, const rad_elem *e,
+                               float dB[3])
+{
+	if (h->exact_dB)
+		memcpy(dB, (const unsigned char *)e + RAD_ELEM_DB_AT,
+		       3 * sizeof(float));
+	else
+		rad_shared3_unpack(e->dB, dB);
+}
+static inline void rad_elem_set_dB(const rad_hier *h, rad_elem *e,
+                                   const float dB[3])
+{
+	if (h->exact_dB)
+		memcpy((unsigned char *)e + RAD_ELEM_DB_AT, dB,
+		       3 * sizeof(float));
+	else
+		e->dB = rad_shared3_pack(dB);
 }
 static inline rad_cluster *rad_cluster_at(const rad_hier *h, uint32_t id)
 {
@@ -408,8 +451,13 @@ double rad_hier_cover_dist(const rad_hier *h, uint32_t poly);
  * wave_room_for). */
 size_t rad_hier_grow_blocks(const rad_hier *h);
 rad_status rad_hier_init(rad_hier *h, const rad_scene *s, rad_mem *mem,
-                         double min_edge, int lists, rad_par *par,
+                         double min_edge, int lists, int exact_dB, rad_par *par,
                          rad_error *err);
+/* Bytes of an element's record: exact_dB as rad_hier_init's. */
+static inline size_t rad_hier_elem_size(int exact_dB)
+{
+	return exact_dB ? RAD_ELEM_EXACT_SIZE : sizeof(rad_elem);
+}
 void rad_hier_destroy(rad_hier *h);
 /*
  * Check the trees and link lists (hier_check.c): 0, or -1 with msg naming

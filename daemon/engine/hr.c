@@ -239,7 +239,7 @@ static void update_leaf(rad_hier *h, uint32_t id, rad_elem *e, const float *x,
 	push_acc *acc = ud;
 	const rad_material *m = rad_elem_mat(h, id);
 	float area = rad_elem_area(h, id);
-	float nb[3];
+	float nb[3], dB[3];
 	double rm = fmax(m->rho[0], fmax(m->rho[1], m->rho[2]));
 	if (x && rm * x[0] > 1)
 		for (int c = 0; c < 3; c++)
@@ -249,9 +249,10 @@ static void update_leaf(rad_hier *h, uint32_t id, rad_elem *e, const float *x,
 	acc->change += area * fabs(rad_luma(nb) - rad_luma(e->B));
 	acc->total += area * rad_luma(nb);
 	for (int c = 0; c < 3; c++) { /* the change: tail, statistics */
-		e->dB[c] = nb[c] - e->B[c];
-		acc->chg[c] += area * fabs(e->dB[c]);
+		dB[c] = nb[c] - e->B[c];
+		acc->chg[c] += area * fabs(dB[c]);
 	}
+	rad_elem_set_dB(h, e, dB);
 	memcpy(e->B, nb, sizeof(nb));
 }
 
@@ -348,12 +349,13 @@ static rad_status study_node(rad_solver *sv, void *ud, uint32_t t)
 			}
 		} else {
 			b = inc = node_luma_B(h, l->src);
-			if (!first)
-				inc = node_is_light(l->src)
-				              ? 0
-				              : fabs(rad_luma(
-				                        rad_elem_at(h, l->src)
-				                                ->dB));
+			if (!first && node_is_light(l->src)) {
+				inc = 0;
+			} else if (!first) {
+				float d[3];
+				rad_elem_dB(h, rad_elem_at(h, l->src), d);
+				inc = fabs(rad_luma(d));
+			}
 		}
 		node_stat_exchange(sv, ud, t, l->src, l->ff, b, inc);
 	}

@@ -423,7 +423,12 @@ double node_energy_scale(const rad_hier *h, int delta, const double got[3],
 	double sent[3] = {0, 0, 0}, worst = 1;
 	for (uint32_t i = 0; i < h->scene->npolys; i++) {
 		const rad_elem *e = rad_elem_at(h, i); /* pulled: the mean */
-		const float *b = delta ? e->dB : e->B;
+		float dB[3];
+		const float *b = e->B;
+		if (delta) {
+			rad_elem_dB(h, e, dB);
+			b = dB;
+		}
 		for (int c = 0; c < 3; c++)
 			sent[c] += (double)rad_elem_area(h, i) * b[c];
 	}
@@ -461,8 +466,10 @@ static void tail_tree(rad_hier *h, uint32_t id, const double k[3])
 			tail_tree(h, e->child + c, k);
 		return;
 	}
+	float dB[3];
+	rad_elem_dB(h, e, dB);
 	for (int c = 0; c < 3; c++)
-		e->B[c] += (float)(k[c] * e->dB[c]);
+		e->B[c] += (float)(k[c] * dB[c]);
 }
 
 double node_tail_add(rad_hier *h, const double q[3])

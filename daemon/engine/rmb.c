@@ -136,15 +136,16 @@ static void update_leaf(rad_hier *h, uint32_t id, rad_elem *e,
 	push_acc *acc = ud;
 	const rad_material *m = rad_elem_mat(h, id);
 	float area = rad_elem_area(h, id);
-	float inc[3];
+	float inc[3], dB[3];
+	rad_elem_dB(h, e, dB); /* the last increment, exact (hier.h) */
 	for (int c = 0; c < 3; c++) {
 		double d = m->rho[c] * e->I[c];
 		/* After the jump (tail_jump) B takes what the increment adds
 		 * beyond the geometric tail already counted. */
-		inc[c] = acc->q ? (float)((d - acc->q[c] * e->dB[c]) /
+		inc[c] = acc->q ? (float)((d - acc->q[c] * dB[c]) /
 		                          (1 - acc->q[c]))
 		                : (float)d;
-		e->dB[c] = (float)d;
+		dB[c] = (float)d;
 		e->B[c] += inc[c];
 		acc->chg[c] += area * fabs(d);
 		/* Leaves report the total irradiance, not the increment
@@ -152,8 +153,9 @@ static void update_leaf(rad_hier *h, uint32_t id, rad_elem *e,
 		if (m->rho[c] > 0)
 			e->I[c] = (e->B[c] - m->emit[c]) / m->rho[c];
 	}
+	rad_elem_set_dB(h, e, dB);
 	acc->change += area * fabs(rad_luma(inc));
-	acc->shot += area * fabs(rad_luma(e->dB));
+	acc->shot += area * fabs(rad_luma(dB));
 	acc->total += area * rad_luma(e->B);
 }
 
@@ -269,7 +271,7 @@ static rad_status rmb_init(rad_solver *sv, rad_error *err)
 	rad_hier_reset_emission(&sv->h);
 	for (uint32_t i = 0; i < sv->scene->npolys; i++) {
 		rad_elem *e = rad_elem_at(&sv->h, i);
-		memcpy(e->dB, e->B, sizeof(e->dB));
+		rad_elem_set_dB(&sv->h, e, e->B);
 	}
 	rad_hier_pull(&sv->h);
 	return RAD_OK;

@@ -102,7 +102,7 @@ static double child_weight(const rad_solver *sv, const rad_link *p,
 static void node_dB(const rad_solver *sv, uint32_t t, double out[3])
 {
 	const rmb_state *st = sv->impl;
-	const float *d;
+	float d[3];
 	if (node_is_light(t)) {
 		for (int c = 0; c < 3; c++)
 			out[c] = st->iter == 0
@@ -118,7 +118,7 @@ static void node_dB(const rad_solver *sv, uint32_t t, double out[3])
 			out[c] = m[c];
 		return;
 	}
-	d = rad_elem_at(&sv->h, t)->dB;
+	rad_elem_dB(&sv->h, rad_elem_at(&sv->h, t), d);
 	for (int c = 0; c < 3; c++)
 		out[c] = d[c];
 	/* The first iteration sends the emission (dB = B = E). */

@@ -35,7 +35,7 @@
 
 #define SOL_MAGIC 0x534c5852u /* "RXLS" little-endian: "luxrad solution" */
 #define SOL_VERSION                                                            \
-	10u /* 2: clusters carry their orientation moments; 3:                 \
+	12u /* 2: clusters carry their orientation moments; 3:                 \
 	     * and where their irradiance came from; 4: elements their         \
 	     * exposed fraction (hier.h, Covered parts); 5: their path, not    \
 	     * their region (hier.h, Regions); 6: clusters no parent; 7: nor   \
@@ -44,7 +44,9 @@
 	     * 10: dB and ndB with the moments, inner clusters only;           \
 	     * 11: polygon, depth, path and exposed fraction in a record per   \
 	     * sibling run and the roots' exposed fractions, after the         \
-	     * elements (hier.h, Runs) */
+	     * elements (hier.h, Runs; written as 10, the element size         \
+	     * telling it apart); 12: an element's dB packed, 32-byte          \
+	     * records (hier.h, Increments) */
 
 struct rad_solution {
 	const rad_scene *scene;
@@ -159,6 +161,18 @@ static uint32_t count_clusters(const rad_hier *h, uint32_t id)
 	       count_clusters(h, c->child + 1);
 }
 
+/* Element id of src as a solution keeps it: dB packed (hier.h,
+ * Increments). */
+static rad_elem sol_elem(const rad_hier *src, uint32_t id)
+{
+	const rad_elem *e = rad_elem_at(src, id);
+	rad_elem out = *e;
+	float dB[3];
+	rad_elem_dB(src, e, dB);
+	out.dB = rad_shared3_pack(dB);
+	return out;
+}
+
 /*
  * Breadth-first renumbering: dst record i is src record map[i]; children
  * runs are appended in the order their parents are met.
@@ -170,7 +184,7 @@ static uint32_t copy_elems(const rad_hier *src, rad_hier *dst)
 	rad_elem *out = (rad_elem *)dst->elems.block[0];
 	rad_elem_run *runs = (rad_elem_run *)dst->runs.block[0];
 	for (uint32_t p = 0; p < np; p++)
-		out[p] = *rad_elem_at(src, p);
+		out[p] = sol_elem(src, p);
 	memcpy(dst->root_exposed, src->root_exposed, np);
 	for (uint32_t i = 0; i < next; i++) {
 		rad_elem *e = &out[i];
@@ -180,7 +194,7 @@ static uint32_t copy_elems(const rad_hier *src, rad_hier *dst)
 		}
 		uint32_t first = next;
 		for (uint32_t k = 0; k < 4; k++)
-			out[first + k] = *rad_elem_at(src, e->child + k);
+			out[first + k] = sol_elem(src, e->child + k);
 		runs[(first - np) / 4] = *rad_elem_run_of(src, e->child);
 		e->child = first;
 		next += 4;
@@ -383,7 +397,9 @@ static int elem_ok(const rad_elem *e, uint32_t np, uint32_t ne)
 	    (e->child < np || e->child >= ne || ne - e->child < 4 ||
 	     (e->child - np) % 4 != 0))
 		return 0;
-	return finite3(e->B) && finite3(e->I) && finite3(e->dB);
+	float dB[3];
+	rad_shared3_unpack(e->dB, dB); /* packed in a solution */
+	return finite3(e->B) && finite3(e->I) && finite3(dB);
 }
 
 /*

@@ -50,7 +50,8 @@ static rad_status solver_build(rad_solver *sv, rad_error *err)
 	rad_status st =
 	        rad_hier_init(&sv->h, sv->scene, &sv->mem,
 	                      sv->opt.min_edge_rel * sv->scene->diag,
-	                      sv->opt.solver == RAD_SOLVER_HR, sv->par, err);
+	                      sv->opt.solver == RAD_SOLVER_HR,
+	                      sv->opt.solver == RAD_SOLVER_RMB, sv->par, err);
 	if (!st)
 		st = sv->ops->init(sv, err);
 	return st;
@@ -91,7 +92,10 @@ rad_status rad_solver_new(const rad_scene *scene, const rad_options *opt,
 		         "its first step starts with (%u polygons: %.1f MiB "
 		         "for their root elements alone)",
 		         sv->ops->name, opt->memory_budget, scene->npolys,
-		         (double)scene->npolys * (sizeof(rad_elem) + 1) /
+		         (double)scene->npolys *
+		                 (rad_hier_elem_size(opt->solver ==
+		                                     RAD_SOLVER_RMB) +
+		                  1) /
 		                 1048576.0);
 	if (st) {
 		rad_solver_free(sv);

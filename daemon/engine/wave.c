@@ -188,7 +188,7 @@ static int split_side(const rad_hier *h, uint32_t r, uint32_t s, int rcv_only)
 static size_t elem_split_bytes(const rad_hier *h, const rad_wave *w)
 {
 	return sizeof(rad_elem_run) +
-	       4 * (sizeof(rad_elem) + (h->lists ? sizeof(uint32_t) : 0) +
+	       4 * (h->elems.rec_size + (h->lists ? sizeof(uint32_t) : 0) +
 	            w->elem_extra);
 }
 

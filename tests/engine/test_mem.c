@@ -18,6 +18,8 @@
 
 #include "mem.h"
 #include "rad.h"
+#include "rng.h"
+#include "shared3.h"
 #include "solver.h"
 #include "wave.h"
 
@@ -121,6 +123,67 @@ static void test_joint_peak_with_base(void **state)
 	rad_mem_free(&scene, RAD_MEM_GEOMETRY, kept);
 	rad_mem_report_joint(&solver, &r);
 	assert_int_equal(r.total, 0);
+}
+
+/*
+ * An element's dB is three signed values with one exponent (shared3.h):
+ * every channel comes back within 1/127 of the largest magnitude, over
+ * the whole range of normal floats, the same bits for the same values,
+ * and the edges (zero, NaN, infinities, below the least normal, a
+ * mantissa that rounds up to 128) as the header says.
+ */
+static void test_shared3_round_trip(void **state)
+{
+	(void)state;
+	uint64_t rng = 15;
+	float v[3], w[3];
+	for (int i = 0; i < 200000; i++) {
+		double m = 0;
+		for (int c = 0; c < 3; c++) {
+			double mag = pow(10, -37 + 74 * rad_uniform(&rng));
+			if (rad_uniform(&rng) < 0.2)
+				mag *= 1e-4; /* a dim channel beside a bright
+				                one */
+			v[c] = (float)(rad_uniform(&rng) < 0.3 ? -mag : mag);
+			m = fmax(m, fabs(v[c]));
+		}
+		rad_shared3 p = rad_shared3_pack(v);
+		rad_shared3_unpack(p, w);
+		for (int c = 0; c < 3; c++) {
+			assert_true(fabs((double)w[c] - v[c]) <= m / 127);
+			/* signs kept, never flipped */
+			assert_true((double)w[c] * v[c] >= 0);
+			if (fabs(v[c]) == m)
+				assert_true(fabs(w[c] / v[c] - 1) <= 1.0 / 128);
+		}
+		assert_int_equal(rad_shared3_pack(w), p); /* a fixed point */
+	}
+	/* zero, and what lies below the least normal float */
+	const float zero[3] = {0, -0.0f, 0}, tiny[3] = {1e-39f, -1e-40f, 0};
+	assert_int_equal(rad_shared3_pack(zero), 0);
+	assert_int_equal(rad_shared3_pack(tiny), 0);
+	rad_shared3_unpack(0, w);
+	assert_true(w[0] == 0 && w[1] == 0 && w[2] == 0);
+	/* the least normal float and the largest value kept */
+	const float lo[3] = {0x1p-126f, 0, -0x1p-126f}, hi[3] = {1e38f, 0, 1};
+	rad_shared3_unpack(rad_shared3_pack(lo), w);
+	assert_true(w[0] == 0x1p-126f && w[2] == -0x1p-126f);
+	rad_shared3_unpack(rad_shared3_pack(hi), w);
+	assert_true(fabs(w[0] / 1e38 - 1) <= 1.0 / 128 && w[2] == 0);
+	/* NaN stays NaN; infinities are held at 1e38 */
+	const float nan[3] = {1, NAN, 1}, inf[3] = {INFINITY, -INFINITY, 2};
+	rad_shared3_unpack(rad_shared3_pack(nan), w);
+	assert_true(isnan(w[0]) && isnan(w[1]) && isnan(w[2]));
+	rad_shared3_unpack(rad_shared3_pack(inf), w);
+	assert_true(isfinite(w[0]) && w[0] >= 0.99e38f && w[1] <= -0.99e38f);
+	/* 127.5 rounds up to 128, one binade higher: still exact */
+	const float up[3] = {127.5f, -4, 0.25f};
+	rad_shared3_unpack(rad_shared3_pack(up), w);
+	assert_true(w[0] == 128 && w[1] == -4 && w[2] == 0);
+	/* exact where 7 bits hold the value */
+	const float ex[3] = {100, -3, 2};
+	rad_shared3_unpack(rad_shared3_pack(ex), w);
+	assert_true(w[0] == 100 && w[1] == -3 && w[2] == 2);
 }
 
 static void test_pool_records_stay_put(void **state)
@@ -291,7 +354,8 @@ static void rmb_hier(const rad_scene *s, rad_mem *mem, rad_hier *h)
 {
 	rad_error err;
 	rad_mem_init(mem);
-	assert_int_equal(rad_hier_init(h, s, mem, 0.0, 0, NULL, &err), RAD_OK);
+	assert_int_equal(rad_hier_init(h, s, mem, 0.0, 0, 0, NULL, &err),
+	                 RAD_OK);
 }
 
 /*
@@ -910,12 +974,14 @@ static void cluster_sums(const rad_hier *h, const rad_cluster *c, double B[3],
 		const rad_elem *e = rad_elem_at(h, h->order[j]);
 		const float *n = h->scene->polys[h->order[j]].n;
 		double a = rad_elem_area(h, h->order[j]);
+		float ed[3];
+		rad_elem_dB(h, e, ed);
 		area += a;
 		for (int k = 0; k < 3; k++) {
 			B[k] += a * e->B[k];
-			dB[k] += a * e->dB[k];
+			dB[k] += a * ed[k];
 			nB[k] += a * rad_luma(e->B) * n[k];
-			ndB[k] += a * rad_luma(e->dB) * n[k];
+			ndB[k] += a * rad_luma(ed) * n[k];
 		}
 	}
 	for (int k = 0; k < 3; k++) {
@@ -1357,6 +1423,7 @@ int main(void)
 	        cmocka_unit_test(test_counts_match_allocator),
 	        cmocka_unit_test(test_limit_shared_between_processes),
 	        cmocka_unit_test(test_joint_peak_with_base),
+	        cmocka_unit_test(test_shared3_round_trip),
 	        cmocka_unit_test(test_pool_records_stay_put),
 	        cmocka_unit_test(test_injected_failure_counts_nothing),
 	        cmocka_unit_test(test_scene_and_solver_return_to_zero),
