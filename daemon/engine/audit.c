@@ -177,7 +177,7 @@ static rad_status node_links(rad_solver *sv, void *ud, uint32_t t)
 {
 	for (uint32_t id = *rad_node_links(&sv->h, t); id != RAD_NONE;) {
 		const rad_hlink *l = rad_hlink_at(&sv->h, id);
-		visit(ud, t, l->src, l->ff, id);
+		visit(ud, t, l->src, rad_hlink_ff(l), id);
 		id = l->next;
 	}
 	return RAD_OK;

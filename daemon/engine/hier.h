@@ -16,7 +16,7 @@
  *     in this cluster" is a range, never a list walk.
  *   - links: receiver <- source transfers with their form factor, of
  *     one of two kinds, the pool's records being the solver's.  Classic
- *     HR (rad_hlink, 16 bytes) chains them on their receiver's list, which
+ *     HR (rad_hlink, 12 bytes) chains them on their receiver's list, which
  *     says whose they are, and frees refined links; the lists' heads are
  *     hr's alone (rad_hier.heads, cluster_heads), not a field of every
  *     element and cluster record.  The reduced-memory
@@ -274,10 +274,54 @@ typedef struct rad_link_ext {
 /* A link of classic HR, on its receiver's list (rad_node_links). */
 typedef struct rad_hlink {
 	uint32_t src;  /* tagged source id */
-	float ff;      /* as rad_link's */
-	float spread;  /* as rad_link's */
+	uint32_t fs;   /* its ff and spread, as rad_link's, in 19 and 13 bits
+	                  (rad_hlink_ff, rad_hlink_spread: Short floats) */
 	uint32_t next; /* next link on the same receiver, or RAD_NONE */
 } rad_hlink;
+
+/*
+ * Short floats.  An hr link's form factor keeps a float's exponent and
+ * its 11 leading mantissa bits (within 2^-12 of itself), its spread the
+ * exponent and 5 (2^-6), both rounded to nearest: 19 and 13 bits, so that
+ * a link is 12 bytes, not 16.  Both are >= 0 (the sign is dropped; a
+ * negative value is stored as 0).  The form factor is fixed once the link
+ * is made, so its rounding makes no noise from one step to the next; the
+ * spread only ranks links against eps (hr_refine.c).
+ */
+static inline uint32_t rad_short_float(float x, int drop)
+{
+	uint32_t b;
+	if (!(x > 0)) /* 0, negative; a NaN stays one */
+		x = isnan(x) ? x : 0;
+	memcpy(&b, &x, sizeof(b));
+	b &= 0x7fffffffu;
+	uint32_t half = 1u << (drop - 1);
+	if (b < 0x7f800000u) /* finite: round; may reach infinity */
+		b = b + half;
+	return b >> drop;
+}
+static inline float rad_short_float_value(uint32_t code, int drop)
+{
+	uint32_t b = code << drop;
+	float x;
+	memcpy(&x, &b, sizeof(x));
+	return x;
+}
+#define RAD_HLINK_FF_DROP 12     /* 19 bits kept */
+#define RAD_HLINK_SPREAD_DROP 18 /* 13 bits kept */
+static inline float rad_hlink_ff(const rad_hlink *l)
+{
+	return rad_short_float_value(l->fs >> 13, RAD_HLINK_FF_DROP);
+}
+static inline float rad_hlink_spread(const rad_hlink *l)
+{
+	return rad_short_float_value(l->fs & 0x1fffu, RAD_HLINK_SPREAD_DROP);
+}
+static inline void rad_hlink_set(rad_hlink *l, float ff, float spread)
+{
+	l->fs = rad_short_float(ff, RAD_HLINK_FF_DROP) << 13 |
+	        rad_short_float(spread, RAD_HLINK_SPREAD_DROP);
+}
 
 /* Sizes the memory study measures by (Regions; links above). */
 _Static_assert(sizeof(rad_elem) == 32, "rad_elem grew");
@@ -286,7 +330,7 @@ _Static_assert(sizeof(rad_elem) == 32, "rad_elem grew");
 _Static_assert(sizeof(rad_elem_run) == 16, "rad_elem_run grew");
 _Static_assert(sizeof(rad_link) == 16, "rad_link grew");
 _Static_assert(sizeof(rad_link_ext) == 12, "rad_link_ext grew");
-_Static_assert(sizeof(rad_hlink) == 16, "rad_hlink grew");
+_Static_assert(sizeof(rad_hlink) == 12, "rad_hlink grew");
 _Static_assert(sizeof(rad_cluster) == 104, "rad_cluster grew");
 _Static_assert(sizeof(rad_cluster_inner) == 52, "rad_cluster_inner grew");
 

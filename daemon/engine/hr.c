@@ -83,11 +83,12 @@ static void node_payload(const gather_job *g, uint32_t rcv,
 		const rad_hlink *l = rad_hlink_at(h, id);
 		if (node_is_light(l->src)) {
 			double b[3];
-			double f = l->ff * node_sends(h, rcv, l->src, 0, b);
+			double f = rad_hlink_ff(l) *
+			           node_sends(h, rcv, l->src, 0, b);
 			for (int c = 0; c < 3; c++)
 				lit[c] += f * b[c];
 		} else {
-			rows += l->ff * g->k[1];
+			rows += rad_hlink_ff(l) * g->k[1];
 		}
 		id = l->next;
 	}
@@ -108,14 +109,15 @@ static void gather_list(gather_job *g, uint32_t rcv, uint32_t head, float I[3],
 		const rad_hlink *l = rad_hlink_at(h, id);
 		int light = node_is_light(l->src);
 		double b[3];
-		double f = l->ff * node_sends(h, rcv, l->src, 0, b);
+		double ff = rad_hlink_ff(l);
+		double f = ff * node_sends(h, rcv, l->src, 0, b);
 		double *acc = light ? lit : surf;
 		for (int c = 0; c < 3; c++)
 			acc[c] += f * b[c];
 		/* Photopic k weighs a surface's share of the direction. */
 		double ks = light ? 1 : g->k[1];
 		if (!light)
-			fsum += l->ff;
+			fsum += ff;
 		node_took(h, rcv, l->src,
 		          ks * f *
 		                  (RAD_LUMA_R * b[0] + RAD_LUMA_G * b[1] +
@@ -357,7 +359,7 @@ static rad_status study_node(rad_solver *sv, void *ud, uint32_t t)
 				inc = fabs(rad_luma(d));
 			}
 		}
-		node_stat_exchange(sv, ud, t, l->src, l->ff, b, inc);
+		node_stat_exchange(sv, ud, t, l->src, rad_hlink_ff(l), b, inc);
 	}
 	return RAD_OK;
 }

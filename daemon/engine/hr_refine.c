@@ -110,8 +110,7 @@ static rad_status store_link(rad_solver *sv, uint32_t r, uint32_t s, float ff,
 	uint32_t *head = rad_node_links(&sv->h, r);
 	rad_hlink *l = rad_hlink_at(&sv->h, id);
 	l->src = s;
-	l->ff = ff;
-	l->spread = spread;
+	rad_hlink_set(l, ff, spread);
 	l->next = *head;
 	*head = id;
 	sv->stats.links_created++;
@@ -358,7 +357,7 @@ static rad_status requeue(rad_solver *sv, hr_state *st, uint32_t r,
  */
 static double link_error(const rad_hier *h, const rad_hlink *l)
 {
-	return 0.5 * node_luma_B(h, l->src) * l->spread;
+	return 0.5 * node_luma_B(h, l->src) * rad_hlink_spread(l);
 }
 
 static int cmp_desc(const void *a, const void *b)
@@ -416,7 +415,9 @@ static rad_status retest_list(rad_solver *sv, hr_state *st, uint32_t r,
 		rad_hlink *l = rad_hlink_at(h, *prev);
 		/* A zero link (cluster pair whose samples saw nothing) is
 		 * judged on its bound: its sources may have lit up. */
-		double f = l->ff > 0 ? l->ff : node_ff_bound(h, r, l->src);
+		double f = rad_hlink_ff(l);
+		if (!(f > 0))
+			f = node_ff_bound(h, r, l->src);
 		if (wave_refinable(h, r, l->src) &&
 		    oracle(sv, r, l->src, f) > sv->opt.eps &&
 		    room_to_split(sv, st, r, l->src, 0)) {

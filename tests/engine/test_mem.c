@@ -186,6 +186,38 @@ static void test_shared3_round_trip(void **state)
 	assert_true(w[0] == 100 && w[1] == -3 && w[2] == 2);
 }
 
+/*
+ * An hr link's form factor and spread in 19 and 13 bits (hier.h, Short
+ * floats): within 2^-12 and 2^-6 of themselves over the range of normal
+ * floats, the same code for the same value, 0 for 0 and for negatives,
+ * and NaN kept.
+ */
+static void test_hlink_short_floats(void **state)
+{
+	(void)state;
+	uint64_t rng = 12;
+	rad_hlink l;
+	for (int i = 0; i < 200000; i++) {
+		float ff = (float)pow(10, -37 + 74 * rad_uniform(&rng));
+		float sp = (float)pow(10, -37 + 74 * rad_uniform(&rng));
+		rad_hlink_set(&l, ff, sp);
+		assert_true(fabs(rad_hlink_ff(&l) / ff - 1) <= 0x1p-12);
+		assert_true(fabs(rad_hlink_spread(&l) / sp - 1) <= 0x1p-6);
+		uint32_t fs = l.fs;
+		rad_hlink_set(&l, rad_hlink_ff(&l), rad_hlink_spread(&l));
+		assert_int_equal(l.fs, fs); /* a fixed point */
+	}
+	rad_hlink_set(&l, 0, 0);
+	assert_true(rad_hlink_ff(&l) == 0 && rad_hlink_spread(&l) == 0);
+	rad_hlink_set(&l, -1, -0.0f);
+	assert_true(rad_hlink_ff(&l) == 0 && rad_hlink_spread(&l) == 0);
+	rad_hlink_set(&l, NAN, 1);
+	assert_true(isnan(rad_hlink_ff(&l)) && rad_hlink_spread(&l) == 1);
+	/* exact where the kept bits hold the value */
+	rad_hlink_set(&l, 0.75f, 1.5f);
+	assert_true(rad_hlink_ff(&l) == 0.75f && rad_hlink_spread(&l) == 1.5f);
+}
+
 static void test_pool_records_stay_put(void **state)
 {
 	(void)state;
@@ -1424,6 +1456,7 @@ int main(void)
 	        cmocka_unit_test(test_limit_shared_between_processes),
 	        cmocka_unit_test(test_joint_peak_with_base),
 	        cmocka_unit_test(test_shared3_round_trip),
+	        cmocka_unit_test(test_hlink_short_floats),
 	        cmocka_unit_test(test_pool_records_stay_put),
 	        cmocka_unit_test(test_injected_failure_counts_nothing),
 	        cmocka_unit_test(test_scene_and_solver_return_to_zero),
