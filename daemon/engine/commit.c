@@ -171,7 +171,11 @@ static rad_status quad_material(rad_scene *s, uint32_t t, uint32_t u,
 	for (int c = 0; c < 3; c++)
 		m.rho[c] = rad_rho_float((at * m.rho[c] + au * mu->rho[c]) /
 		                         (at + au));
-	return rad_scene_material_id(s, &m, &pt->mat, err);
+	uint32_t id;
+	rad_status st = rad_scene_material_id(s, &m, &id, err);
+	if (!st)
+		pt->mat = id;
+	return st;
 }
 
 /* Rewrite triangle t as the parallelogram with corner a (opposite its

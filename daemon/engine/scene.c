@@ -496,8 +496,10 @@ rad_status rad_scene_add_surface(rad_scene *s, const rad_surface_desc *d,
 			rad_material m = s->mats[material];
 			for (int c = 0; c < 3; c++)
 				m.rho[c] = rad_rho_float(rho[3 * i + c]);
-			if ((st = rad_scene_material_id(s, &m, &p->mat, err)))
+			uint32_t id;
+			if ((st = rad_scene_material_id(s, &m, &id, err)))
 				return st;
+			p->mat = id;
 		}
 		if (s->stage_base)
 			s->stage_base[s->npolys] =

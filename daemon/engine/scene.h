@@ -72,18 +72,19 @@ static inline int rad_material_emits(const rad_material *m)
 }
 
 typedef struct rad_poly {
-	uint32_t v[4]; /* corners in s->verts: p0, p0+e1, then p0+e1+e2 and
-	                  p0+e2 (a parallelogram; its third corner is the
-	                  input's own vertex), or p0+e2 twice (a triangle):
-	                  Embree's quad layout, so the BVH reads this array */
-	float n[3];    /* unit normal, front side */
-	float area;    /* m2 */
-	uint32_t mat;  /* index into the material table */
-	uint32_t node; /* index into the node name table */
-	uint8_t quad;  /* 1 = parallelogram, 0 = triangle */
-	uint8_t side;  /* rad_side */
+	uint32_t v[4];     /* corners in s->verts: p0, p0+e1, then p0+e1+e2 and
+	                      p0+e2 (a parallelogram; its third corner is the
+	                      input's own vertex), or p0+e2 twice (a triangle):
+	                      Embree's quad layout, so the BVH reads this array */
+	float n[3];        /* unit normal, front side */
+	float area;        /* m2 */
+	uint32_t mat : 28; /* index into the material table (fewer than
+	                      RAD_SCENE_MAX_IDS: 2^28) */
+	uint32_t quad : 1; /* 1 = parallelogram, 0 = triangle */
+	uint32_t side : 2; /* rad_side */
+	uint32_t node;     /* index into the node name table */
 } rad_poly;
-_Static_assert(sizeof(rad_poly) == 44, "rad_poly layout");
+_Static_assert(sizeof(rad_poly) == 40, "rad_poly layout");
 
 /* Which faces of its sheet a polygon is. */
 enum rad_side {

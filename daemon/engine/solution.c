@@ -76,7 +76,8 @@ static uint64_t scene_digest(const rad_scene *s)
 		memcpy(buf + o, f, sizeof f), o += sizeof f;
 		memcpy(buf + o, p->n, sizeof p->n), o += sizeof p->n;
 		memcpy(buf + o, &p->area, sizeof p->area), o += sizeof p->area;
-		memcpy(buf + o, &p->mat, sizeof p->mat), o += sizeof p->mat;
+		uint32_t mat = p->mat; /* a bit-field: its value, as before */
+		memcpy(buf + o, &mat, sizeof mat), o += sizeof mat;
 		memcpy(buf + o, &p->node, sizeof p->node), o += sizeof p->node;
 		buf[o++] = p->quad;
 		for (size_t k = 0; k < o; k++)
