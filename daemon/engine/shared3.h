@@ -78,13 +78,4 @@ static inline void rad_shared3_unpack(rad_shared3 p, float out[3])
 		out[c] = (float)((int8_t)(uint8_t)(p >> (8 * c)) * s);
 }
 
-/* The same, into doubles. */
-static inline void rad_shared3_unpack_d(rad_shared3 p, double out[3])
-{
-	float f[3];
-	rad_shared3_unpack(p, f);
-	for (int c = 0; c < 3; c++)
-		out[c] = f[c];
-}
-
 #endif

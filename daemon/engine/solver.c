@@ -44,14 +44,20 @@ static void solver_drop(rad_solver *sv)
 	rad_hier_destroy(&sv->h);
 }
 
+/* 1 if the solver's elements keep dB in floats: rmb sends it (hier.h,
+ * Increments). */
+static int exact_dB(const rad_options *o)
+{
+	return o->solver == RAD_SOLVER_RMB;
+}
+
 /* The solver's hierarchy and own state, from nothing. */
 static rad_status solver_build(rad_solver *sv, rad_error *err)
 {
-	rad_status st =
-	        rad_hier_init(&sv->h, sv->scene, &sv->mem,
-	                      sv->opt.min_edge_rel * sv->scene->diag,
-	                      sv->opt.solver == RAD_SOLVER_HR,
-	                      sv->opt.solver == RAD_SOLVER_RMB, sv->par, err);
+	rad_status st = rad_hier_init(&sv->h, sv->scene, &sv->mem,
+	                              sv->opt.min_edge_rel * sv->scene->diag,
+	                              sv->opt.solver == RAD_SOLVER_HR,
+	                              exact_dB(&sv->opt), sv->par, err);
 	if (!st)
 		st = sv->ops->init(sv, err);
 	return st;
@@ -93,9 +99,7 @@ rad_status rad_solver_new(const rad_scene *scene, const rad_options *opt,
 		         "for their root elements alone)",
 		         sv->ops->name, opt->memory_budget, scene->npolys,
 		         (double)scene->npolys *
-		                 (rad_hier_elem_size(opt->solver ==
-		                                     RAD_SOLVER_RMB) +
-		                  1) /
+		                 (rad_hier_elem_size(exact_dB(opt)) + 1) /
 		                 1048576.0);
 	if (st) {
 		rad_solver_free(sv);
