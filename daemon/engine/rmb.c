@@ -30,6 +30,9 @@ typedef struct push_acc {
 	double chg[3];        /* sum A |dB| per channel */
 	double shot;          /* sum A |luma dB|: what goes out next */
 	const double *q;      /* after the tail jump: its rates, else NULL */
+	double hold_below;    /* delayed emission: a leaf holds R back while
+	                         |luma R| is below this (0: never) */
+	double held;          /* sum A |luma S_B| held back */
 } push_acc;
 
 static void zero_I(rad_hier *h, uint32_t t)
@@ -50,6 +53,41 @@ static void zero_I(rad_hier *h, uint32_t t)
 	if (e->child != RAD_NONE)
 		for (uint32_t k = 0; k < 4; k++)
 			zero_I(h, e->child + k);
+}
+
+/*
+ * Delayed emission (docs/ALGORITHM.md §6, the report's §5.3), with
+ * rad_options.delay = alpha > 0.  A leaf's radiosity to transmit,
+ * R = rho I (I gathered this step plus what it held back), is held back
+ * while its photopic value is below alpha times the mean dB sent last
+ * step (the first: the mean flux), and sent in full once it is not.  A
+ * held leaf sends nothing (dB = 0), and its B does not take R; so the
+ * links from it coarsen or go (rmb's oracle reads dB).  What it holds
+ * costs no storage: its reported I, the total irradiance, is
+ * (B + S_B - E) / rho, so S_B = rho I - (B - E) is read back from it at
+ * the next step's start and becomes the I the gather adds to (hold_I).
+ * The answer the leaves report includes S_B; the B that sources send and
+ * the final gather reads does not (at most alpha times the mean dB a
+ * leaf, which falls with it).  The tail jump, which takes every leaf's
+ * dB to be a geometric series, is not made: a held leaf's is not.
+ */
+static void hold_I(rad_hier *h, uint32_t id, double P[3])
+{
+	rad_elem *e = rad_elem_at(h, id);
+	if (e->child != RAD_NONE) {
+		memset(e->I, 0, sizeof(e->I));
+		for (uint32_t k = 0; k < 4; k++)
+			hold_I(h, e->child + k, P);
+		return;
+	}
+	const rad_material *m = rad_elem_mat(h, id);
+	double area = rad_elem_area(h, id);
+	for (int c = 0; c < 3; c++) {
+		double s = m->rho[c] * (double)e->I[c] -
+		           ((double)e->B[c] - m->emit[c]);
+		e->I[c] = m->rho[c] > 0 && s > 0 ? (float)(s / m->rho[c]) : 0;
+		P[c] += area * e->I[c];
+	}
 }
 
 /*
@@ -119,6 +157,11 @@ static double energy_bound(rad_solver *sv)
 		node_power(h, i, got);
 	if (np > 0)
 		cluster_power(h, RAD_TAG_CLUSTER, got);
+	/* What the leaves held back was sent before (hold_I); where the bound
+	 * scales the rest, it is scaled with it. */
+	const rmb_state *st = sv->impl;
+	for (int c = 0; c < 3; c++)
+		got[c] -= st->held[c];
 	double worst = node_energy_scale(h, 1, got, k);
 	if (worst >= 1)
 		return 1;
@@ -136,10 +179,13 @@ static void update_leaf(rad_hier *h, uint32_t id, rad_elem *e,
 	push_acc *acc = ud;
 	const rad_material *m = rad_elem_mat(h, id);
 	float area = rad_elem_area(h, id);
-	float inc[3], dB[3];
+	float inc[3], dB[3], R[3];
 	rad_elem_dB(h, e, dB); /* the last increment, exact (hier.h) */
+	for (int c = 0; c < 3; c++)
+		R[c] = m->rho[c] * e->I[c];
+	int hold = fabs(rad_luma(R)) < acc->hold_below;
 	for (int c = 0; c < 3; c++) {
-		double d = m->rho[c] * e->I[c];
+		double d = hold ? 0 : R[c];
 		/* After the jump (tail_jump) B takes what the increment adds
 		 * beyond the geometric tail already counted. */
 		inc[c] = acc->q ? (float)((d - acc->q[c] * dB[c]) /
@@ -151,9 +197,12 @@ static void update_leaf(rad_hier *h, uint32_t id, rad_elem *e,
 		/* Leaves report the total irradiance, not the increment
 		 * (a black leaf gathers nothing: it keeps the last one). */
 		if (m->rho[c] > 0)
-			e->I[c] = (e->B[c] - m->emit[c]) / m->rho[c];
+			e->I[c] = (e->B[c] + (hold ? R[c] : 0) - m->emit[c]) /
+			          m->rho[c];
 	}
 	rad_elem_set_dB(h, e, dB);
+	if (hold)
+		acc->held += area * fabs(rad_luma(R));
 	acc->change += area * fabs(rad_luma(inc));
 	acc->shot += area * fabs(rad_luma(dB));
 	acc->total += area * rad_luma(e->B);
@@ -170,7 +219,7 @@ static void update_leaf(rad_hier *h, uint32_t id, rad_elem *e,
  */
 static int tail_jump(rad_solver *sv, rmb_state *st)
 {
-	if (st->jumped || st->iter < 4 ||
+	if (st->jumped || st->iter < 4 || sv->opt.delay > 0 ||
 	    !node_tail_rates(&st->chg[0][0], st->q))
 		return 0;
 	st->mean_B = node_tail_add(&sv->h, st->q);
@@ -294,8 +343,12 @@ static rad_status rmb_step(rad_solver *sv, rad_error *err)
 	/* A first step cancelled between rows resumes its gather. */
 	if (st->iter > 0 || st->init_row == 0) {
 		zero_I(h, RAD_TAG_CLUSTER);
+		memset(st->held, 0, sizeof(st->held));
 		for (uint32_t i = 0; i < sv->scene->npolys; i++)
-			zero_I(h, i);
+			if (sv->opt.delay > 0)
+				hold_I(h, i, st->held);
+			else
+				zero_I(h, i);
 	}
 	rad_status rs = rmb_refine_gather(sv, st);
 	if (rs == RAD_ERR_CANCELLED) {
@@ -313,7 +366,12 @@ static rad_status rmb_step(rad_solver *sv, rad_error *err)
 	if (st->iter > 0)
 		energy_bound(sv);
 	rad_solver_progress(sv, 0.9);
-	push_acc acc = {0, 0, {0, 0, 0}, 0, st->jumped ? st->q : NULL};
+	push_acc acc = {0, 0, {0, 0, 0}, 0, st->jumped ? st->q : NULL, 0, 0};
+	if (sv->opt.delay > 0)
+		acc.hold_below =
+		        sv->opt.delay *
+		        (st->iter == 0 ? sv->flux_scale / sv->scene->total_area
+		                       : st->mean_dB);
 	rad_hier_push(h, update_leaf, NULL, &acc);
 	rad_hier_pull(h);
 	memmove(st->chg[1], st->chg[0], 2 * sizeof(st->chg[0]));

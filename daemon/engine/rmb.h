@@ -52,6 +52,10 @@ typedef struct rmb_state {
 	 * emax  the largest of them; SCRATCH, for one step. */
 	float *cut, *err, *emax;
 	size_t cap_cut, cap_err, cap_emax;
+	/* Delayed emission (rad_options.delay): what the leaves held back,
+	 * sum A S_B / rho per channel, put back into their I at the step's
+	 * start (rmb.c, hold_I). */
+	double held[3];
 } rmb_state;
 
 /*

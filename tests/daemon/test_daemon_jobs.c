@@ -125,6 +125,7 @@ static void test_job_lifecycle_follows_the_protocol(void **state)
 	        NULL};
 	dm_require_keys(o, "job.create options", opts);
 	assert_true(dm_num(o, "tol") == 1e-3);
+	assert_true(dm_num(o, "delay") == 0);
 	assert_true(dm_num(o, "accuracy") == 0.02);
 	assert_true(dm_num(o, "query_tol") == 0.01);
 	assert_int_equal(dm_int(o, "max_iterations"), 10000);

@@ -463,6 +463,10 @@ typedef enum rad_store {
 	X(clustering, "clustering", "no-clustering", BOOL, 1, 0, 1,            \
 	  RAD_RANGE_CLOSED, RAD_NO_CHOICES, "BOOL", "",                        \
 	  "hr, rmb: volume clusters (off: every polygon pair linked)")         \
+	X(delay, "delay", "delay", DOUBLE, 0, 0, 1, RAD_RANGE_CLOSED,          \
+	  RAD_NO_CHOICES, "A", "",                                             \
+	  "rmb: delayed emission; a leaf holds back radiosity to send below "  \
+	  "this fraction of the last mean (0 = off)")                         \
 	X(store, "store", "store", ENUM, RAD_STORE_ANTICIPATE, 0, 1,           \
 	  RAD_RANGE_CLOSED, RAD_STORE_CHOICES, "NAME", "",                     \
 	  "rmb: link creation criterion; minimal = the report's rule alone")   \
