@@ -662,13 +662,11 @@ uint32_t rad_elem_split(rad_hier *h, uint32_t id)
 	run->level = (uint8_t)(rad_elem_level(h, id) + 1);
 	run->path = rad_elem_path(h, id);
 	uint8_t exposed = rad_elem_exposed_raw(h, id);
-	float dB[3];
-	rad_elem_dB(h, e, dB);
 	for (uint32_t k = 0; k < 4; k++) {
 		rad_elem *ch = rad_elem_at(h, c + k);
 		ch->child = RAD_NONE;
 		memcpy(ch->B, e->B, sizeof(ch->B));
-		rad_elem_set_dB(h, ch, dB);
+		rad_elem_copy_dB(h, ch, e);
 		/* Every quarter measures its own: a parent's points can
 		 * miss a cover that a quarter straddles (hier.h). */
 		run->exposed[k] = exposed;

@@ -422,6 +422,14 @@ static inline void rad_elem_set_dB(const rad_hier *h, rad_elem *e,
 	else
 		e->dB = rad_shared3_pack(dB);
 }
+/* Element to's dB, from's as stored: no unpacking and packing again. */
+static inline void rad_elem_copy_dB(const rad_hier *h, rad_elem *to,
+                                    const rad_elem *from)
+{
+	memcpy((unsigned char *)to + RAD_ELEM_DB_AT,
+	       (const unsigned char *)from + RAD_ELEM_DB_AT,
+	       h->exact_dB ? 3 * sizeof(float) : sizeof(rad_shared3));
+}
 static inline rad_cluster *rad_cluster_at(const rad_hier *h, uint32_t id)
 {
 	return (rad_cluster *)rad_pool_at(&h->clusters, id & ~RAD_TAG_MASK);
