@@ -35,26 +35,6 @@ typedef struct push_acc {
 	double held;          /* sum A |luma S_B| held back */
 } push_acc;
 
-static void zero_I(rad_hier *h, uint32_t t)
-{
-	if (node_is_cluster(t)) {
-		rad_cluster *c = rad_cluster_at(h, t);
-		memset(c->I, 0, sizeof(c->I));
-		memset(c->V, 0, sizeof(c->V));
-		c->S = 0;
-		if (c->child != RAD_NONE) {
-			zero_I(h, (c->child) | RAD_TAG_CLUSTER);
-			zero_I(h, (c->child + 1) | RAD_TAG_CLUSTER);
-		}
-		return;
-	}
-	rad_elem *e = rad_elem_at(h, t);
-	memset(e->I, 0, sizeof(e->I));
-	if (e->child != RAD_NONE)
-		for (uint32_t k = 0; k < 4; k++)
-			zero_I(h, e->child + k);
-}
-
 /*
  * Delayed emission (docs/ALGORITHM.md §6, the report's §5.3), with
  * rad_options.delay = alpha > 0.  A leaf's radiosity to transmit,
@@ -65,21 +45,14 @@ static void zero_I(rad_hier *h, uint32_t t)
  * links from it coarsen or go (rmb's oracle reads dB).  What it holds
  * costs no storage: its reported I, the total irradiance, is
  * (B + S_B - E) / rho, so S_B = rho I - (B - E) is read back from it at
- * the next step's start and becomes the I the gather adds to (hold_I).
+ * the next step's start and becomes the I the gather adds to (hold_leaf).
  * The answer the leaves report includes S_B; the B that sources send and
  * the final gather reads does not (at most alpha times the mean dB a
  * leaf, which falls with it).  The tail jump, which takes every leaf's
  * dB to be a geometric series, is not made: a held leaf's is not.
  */
-static void hold_I(rad_hier *h, uint32_t id, double P[3])
+static void hold_leaf(rad_hier *h, uint32_t id, rad_elem *e, double P[3])
 {
-	rad_elem *e = rad_elem_at(h, id);
-	if (e->child != RAD_NONE) {
-		memset(e->I, 0, sizeof(e->I));
-		for (uint32_t k = 0; k < 4; k++)
-			hold_I(h, e->child + k, P);
-		return;
-	}
 	const rad_material *m = rad_elem_mat(h, id);
 	double area = rad_elem_area(h, id);
 	for (int c = 0; c < 3; c++) {
@@ -88,6 +61,33 @@ static void hold_I(rad_hier *h, uint32_t id, double P[3])
 		e->I[c] = m->rho[c] > 0 && s > 0 ? (float)(s / m->rho[c]) : 0;
 		P[c] += area * e->I[c];
 	}
+}
+
+/* Clear the I (and a cluster's V, S) the gather adds to, in node t's
+ * tree; with held (delayed emission), a leaf keeps what it holds back
+ * instead (hold_leaf), summed into held. */
+static void zero_I(rad_hier *h, uint32_t t, double *held)
+{
+	if (node_is_cluster(t)) {
+		rad_cluster *c = rad_cluster_at(h, t);
+		memset(c->I, 0, sizeof(c->I));
+		memset(c->V, 0, sizeof(c->V));
+		c->S = 0;
+		if (c->child != RAD_NONE) {
+			zero_I(h, (c->child) | RAD_TAG_CLUSTER, held);
+			zero_I(h, (c->child + 1) | RAD_TAG_CLUSTER, held);
+		}
+		return;
+	}
+	rad_elem *e = rad_elem_at(h, t);
+	if (held && e->child == RAD_NONE) {
+		hold_leaf(h, t, e, held);
+		return;
+	}
+	memset(e->I, 0, sizeof(e->I));
+	if (e->child != RAD_NONE)
+		for (uint32_t k = 0; k < 4; k++)
+			zero_I(h, e->child + k, held);
 }
 
 /*
@@ -157,8 +157,8 @@ static double energy_bound(rad_solver *sv)
 		node_power(h, i, got);
 	if (np > 0)
 		cluster_power(h, RAD_TAG_CLUSTER, got);
-	/* What the leaves held back was sent before (hold_I); where the bound
-	 * scales the rest, it is scaled with it. */
+	/* What the leaves held back was sent before (hold_leaf); where the
+	 * bound scales the rest, it is scaled with it. */
 	const rmb_state *st = sv->impl;
 	for (int c = 0; c < 3; c++)
 		got[c] -= st->held[c];
@@ -342,13 +342,11 @@ static rad_status rmb_step(rad_solver *sv, rad_error *err)
 	wave_step_begin(sv, &st->wave);
 	/* A first step cancelled between rows resumes its gather. */
 	if (st->iter > 0 || st->init_row == 0) {
-		zero_I(h, RAD_TAG_CLUSTER);
+		double *held = sv->opt.delay > 0 ? st->held : NULL;
+		zero_I(h, RAD_TAG_CLUSTER, NULL);
 		memset(st->held, 0, sizeof(st->held));
 		for (uint32_t i = 0; i < sv->scene->npolys; i++)
-			if (sv->opt.delay > 0)
-				hold_I(h, i, st->held);
-			else
-				zero_I(h, i);
+			zero_I(h, i, held);
 	}
 	rad_status rs = rmb_refine_gather(sv, st);
 	if (rs == RAD_ERR_CANCELLED) {

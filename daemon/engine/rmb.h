@@ -54,7 +54,7 @@ typedef struct rmb_state {
 	size_t cap_cut, cap_err, cap_emax;
 	/* Delayed emission (rad_options.delay): what the leaves held back,
 	 * sum A S_B / rho per channel, put back into their I at the step's
-	 * start (rmb.c, hold_I). */
+	 * start (rmb.c, hold_leaf). */
 	double held[3];
 } rmb_state;
 
