@@ -11,10 +11,16 @@ Prints, per run, the mean of |error| and the worst (signed) error over
 the points the reference lights, error = (lux - reference) / reference,
 with the run's iterations and solve seconds.  Reads both layouts of the
 statistics (`stats.iteration` now, `iterations` in older builds), so a
-run of an older commit can be compared with the same references.
+run of an older commit can be compared with the same references.  The
+errors are validate_report.py's (lux_errors), as the study reports them.
 """
 import json
+import math
+import os
 import sys
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import validate_report as vr  # noqa: E402
 
 
 def main():
@@ -29,11 +35,9 @@ def main():
         if len(lux) != len(ref):
             sys.exit(f"{path}: {len(lux)} points, the reference has "
                      f"{len(ref)}")
-        errs = [(v - r) / r for v, r in zip(lux, ref) if r > 0]
-        if not errs:
+        _, worst, mean = vr.lux_errors(lux, ref)
+        if math.isnan(worst):
             sys.exit(f"{sys.argv[1]}: no lit point")
-        mean = sum(abs(e) for e in errs) / len(errs)
-        worst = max(errs, key=abs)
         iters = run.get("stats", {}).get("iteration", run.get("iterations"))
         print(f"{path}: mean {100 * mean:.2f} % worst {100 * worst:+.2f} % "
               f"iterations {iters} solve {run['seconds']:.2f} s")

@@ -74,6 +74,18 @@ def read_points(path):
     return pts
 
 
+def lux_errors(lux, ref):
+    """(errors, worst, mean) of lux against ref: per point
+    (lux - ref) / ref, NaN where ref lights nothing; the signed error
+    furthest from 0 (NaN without a lit point) and the mean of |error|
+    (0 without one), over the lit points."""
+    errs = [(a - r) / r if r > 0 else float("nan") for a, r in zip(lux, ref)]
+    good = [e for e in errs if not math.isnan(e)]
+    worst = max(good, key=abs) if good else float("nan")
+    mean = sum(abs(e) for e in good) / len(good) if good else 0
+    return errs, worst, mean
+
+
 def one_run(out, name, solver, acc, ref, sd):
     base = os.path.join(out, "runs", "%s.%s.%s" % (name, solver, acc))
     if not os.path.exists(base + ".rc"):
@@ -107,11 +119,7 @@ def one_run(out, name, solver, acc, ref, sd):
     if ref is None:
         run["status"] = "ok (no reference)"
         return run
-    errs = [(a - r) / r if r > 0 else float("nan") for a, r in zip(lux, ref)]
-    good = [e for e in errs if not math.isnan(e)]
-    run["errs"] = errs
-    run["worst"] = max(good, key=abs) if good else float("nan")
-    run["mean"] = sum(abs(e) for e in good) / len(good) if good else 0
+    run["errs"], run["worst"], run["mean"] = lux_errors(lux, ref)
     run["covered"] = sum(1 for a, r, u, s in zip(lux, ref, el, sd)
                          if abs(a - r) <= u + 3 * s)
     return run
