@@ -92,7 +92,7 @@ double rad_ff_patch_spread(const rad_vis *vis, const rad_patch *r,
  * another receives something is left out when something in front of it
  * closer than rcover covers it (hier.h, Covered parts; one ray, counted
  * in *rays): the mean is then over the receiver's exposed part, and the
- * caller scales it by the exposed fraction.
+ * caller scales it by the exposed fraction.  n <= RAD_FF_MAX_SAMPLES.
  */
 double rad_ff_rcv_mean(const rad_vis *vis, v3 nr, const v3 *xs, const double *f,
                        int n, double rcover, uint64_t *rays, double *spread);

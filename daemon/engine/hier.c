@@ -376,9 +376,8 @@ static void measure_exposed(const rad_hier *h, uint32_t id)
 	rad_patch p;
 	v3 pts[RAD_COVER_SAMPLES];
 	rad_elem_patch(h, id, &p);
-	int n = rad_patch_scatter(&p, RAD_COVER_SAMPLES, pts), open = 0;
-	for (int k = 0; k < n; k++)
-		open += !rad_vis_covered(v, pts[k], p.n, dist);
+	int n = rad_patch_scatter(&p, RAD_COVER_SAMPLES, pts);
+	int open = rad_vis_keep_uncovered(v, p.n, dist, pts, NULL, n, NULL);
 	uint8_t x = (uint8_t)((open * RAD_EXPOSED_ALL + n / 2) / n);
 	if (id < h->run0)
 		h->root_exposed[id] = x;

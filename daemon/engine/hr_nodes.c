@@ -565,7 +565,14 @@ static double ff_iso(const rad_solver *sv, uint32_t rcv, uint32_t src,
 	*spread = 0;
 	if (!mr || !ms)
 		return 0;
+	/* Every point pair's ray, traced together (rad_vis_segments), and
+	 * what it adds to its receiver point's row when open. */
+	rad_vis_seg seg[RAD_FF_MAX_SAMPLES * RAD_FF_MAX_SAMPLES];
+	double add[RAD_FF_MAX_SAMPLES * RAD_FF_MAX_SAMPLES];
+	unsigned char open[RAD_FF_MAX_SAMPLES * RAD_FF_MAX_SAMPLES];
+	int owner[RAD_FF_MAX_SAMPLES], end[RAD_FF_MAX_SAMPLES];
 	for (int pass = 0; pass < 2 && used == 0; pass++) {
+		int n = 0, owners = 0;
 		for (int i = 0; i < mr; i++) {
 			v3 u[RAD_FF_MAX_SAMPLES];
 			double d2[RAD_FF_MAX_SAMPLES];
@@ -595,7 +602,6 @@ static double ff_iso(const rad_solver *sv, uint32_t rcv, uint32_t src,
 			 * -0.5 %). */
 			double share = ssurf ? 1.0 / nrow : 1;
 			double sa = ssurf ? as : 1.0 / nrow;
-			double row = 0;
 			for (int j = 0; j < ms; j++) {
 				if (!ok[j])
 					continue;
@@ -615,11 +621,20 @@ static double ff_iso(const rad_solver *sv, uint32_t rcv, uint32_t src,
 				/* A point facing away leaves from its back. */
 				v3 na = cr > 0 ? nx[i] : v3_scale(nx[i], -1);
 				v3 nb = cs > 0 ? ny[j] : v3_scale(ny[j], -1);
-				if (rad_vis_segment(sv->scene->vis, x[i], &na,
-				                    y[j], &nb))
-					row += share * iso_ff(a, c, d2[j]);
+				seg[n] = (rad_vis_seg){x[i], na, y[j], nb};
+				add[n++] = share * iso_ff(a, c, d2[j]);
 			}
-			x[used] = x[i];
+			owner[owners] = i;
+			end[owners++] = n;
+		}
+		if (n > 0)
+			rad_vis_segments(sv->scene->vis, seg, n, open);
+		for (int k = 0, q = 0; k < owners; k++) {
+			double row = 0;
+			for (; q < end[k]; q++)
+				if (open[q])
+					row += add[q];
+			x[used] = x[owner[k]];
 			rows[used++] = row;
 		}
 	}

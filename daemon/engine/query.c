@@ -151,13 +151,15 @@ static double covered_ff(gather *g, uint32_t id, const rad_patch *p, double F,
                          double r)
 {
 	v3 y[RAD_COVER_SAMPLES];
+	rad_vis_seg s[RAD_COVER_SAMPLES];
+	unsigned char seen[RAD_COVER_SAMPLES];
 	int n = rad_patch_scatter(p, RAD_COVER_SAMPLES, y), tried = 0, open = 0;
-	for (int k = 0; k < n; k++) {
-		if (!(v3_dot(v3_sub(y[k], g->x), g->n) > 0))
-			continue;
-		tried++;
-		open += rad_vis_segment(g->vis, g->x, &g->n, y[k], &p->n);
-	}
+	for (int k = 0; k < n; k++)
+		if (v3_dot(v3_sub(y[k], g->x), g->n) > 0)
+			s[tried++] = (rad_vis_seg){g->x, g->n, y[k], p->n};
+	rad_vis_segments(g->vis, s, tried, seen);
+	for (int k = 0; k < tried; k++)
+		open += seen[k];
 	double v = tried ? (double)open / tried : rad_elem_exposed(g->h, id);
 	add_error(g, query_piece_error(r * F, v, tried ? tried : 1));
 	return F * v;
@@ -378,9 +380,14 @@ static double cluster_seen(const gather *g, const rad_cluster *c)
 			ny[n++] = f > 0 ? pa.n : v3_scale(pa.n, -1);
 		}
 	}
+	rad_vis_seg s[CLUSTER_RAYS];
+	unsigned char open[CLUSTER_RAYS];
+	for (int k = 0; k < n; k++)
+		s[k] = (rad_vis_seg){g->x, g->n, y[k], ny[k]};
+	rad_vis_segments(g->vis, s, n, open);
 	int seen = 0;
 	for (int k = 0; k < n; k++)
-		seen += rad_vis_segment(g->vis, g->x, &g->n, y[k], &ny[k]);
+		seen += open[k];
 	return n ? (double)seen / n : 0;
 }
 

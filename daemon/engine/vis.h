@@ -42,12 +42,24 @@ double rad_vis_eps(const rad_vis *v);
  * centre).  The trimming above is applied here.
  */
 int rad_vis_segment(const rad_vis *v, v3 a, const v3 *na, v3 b, const v3 *nb);
+/* A segment between two surface points, with their normals. */
+typedef struct rad_vis_seg {
+	v3 a, na, b, nb;
+} rad_vis_seg;
+/* rad_vis_segment(v, s.a, &s.na, s.b, &s.nb) for each of n segments,
+ * traced in packets: open[k] is segment k's answer, the same one. */
+void rad_vis_segments(const rad_vis *v, const rad_vis_seg *s, int n,
+                      unsigned char *open);
 
 /*
  * 1 if something lies in front of the surface point x (unit normal n),
  * between the trimming distance and dist: x is covered (hier.h).
  */
 int rad_vis_covered(const rad_vis *v, v3 x, v3 n, double dist);
+/* rad_vis_covered for each of the count points pts (normal n), traced in
+ * packets: covered[k] is point k's answer, the same one. */
+void rad_vis_covered_n(const rad_vis *v, v3 n, double dist, const v3 *pts,
+                       int count, unsigned char *covered);
 
 /*
  * Keep, of the count points pts on a surface of unit normal n, those not

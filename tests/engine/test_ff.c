@@ -402,16 +402,25 @@ static void test_ff_sample_patterns_are_balanced(void **state)
 
 /* ------------------------------------------------------------- visibility */
 
-static void test_vis_occluder_reduces_ff(void **state)
+/* A 1 m floor, its ceiling 1 m up, and a 0.5 m plate halfway between
+ * over the middle; *r and *c: the floor's and the ceiling's patches. */
+static rad_scene *plate_scene(rad_patch *r, rad_patch *c)
 {
-	(void)state;
 	rad_scene *s = scene_start();
 	add_quad(s, 0, 0, O, V(1, 0, 0), V(0, 1, 0));
 	add_quad(s, 0, 0, V(0, 0, 1), V(0, 1, 0), V(1, 0, 0));
 	add_quad(s, 0, 0, V(0.25, 0.25, 0.5), V(0.5, 0, 0), V(0, 0.5, 0));
 	commit_ok(s);
-	rad_patch r = poly_near(s, V(0.5, 0.5, 0));
-	rad_patch c = poly_near(s, V(0.5, 0.5, 1));
+	*r = poly_near(s, V(0.5, 0.5, 0));
+	*c = poly_near(s, V(0.5, 0.5, 1));
+	return s;
+}
+
+static void test_vis_occluder_reduces_ff(void **state)
+{
+	(void)state;
+	rad_patch r, c;
+	rad_scene *s = plate_scene(&r, &c);
 	uint64_t rays = 0;
 	double open = rad_ff_unoccluded(&r, &c, 16);
 	double shaded = rad_ff_patch(s->vis, &r, &c, 16, 16, &rays);
@@ -614,6 +623,60 @@ static void test_vis_no_self_occlusion_at_any_scale(void **state)
 		assert_rel(t, h, 1e-3);
 		rad_scene_free(s);
 	}
+}
+
+/*
+ * The packet paths answer as the single rays do, ray by ray: segments
+ * from a 16 x 16 grid on the floor to one on the ceiling, a plate between
+ * them hiding some and not others, traced in runs of every length from
+ * 0 to 40 (packets full, partial and of one lane, and none).  And the
+ * floor's grid tested for cover in runs of 0, 13, 26, 39 and 256: the
+ * plate, 0.5 m over the floor's middle, covers some points within
+ * 0.6 m and none within 0.4 m.
+ */
+static void test_vis_packets_answer_as_single_rays(void **state)
+{
+	(void)state;
+	rad_patch r, c;
+	rad_scene *s = plate_scene(&r, &c);
+	rad_vis_thread_init();
+	static v3 a[256], b[256];
+	static rad_vis_seg seg[256];
+	static unsigned char open[256];
+	grid16(&r, a);
+	grid16(&c, b);
+	for (int k = 0; k < 256; k++)
+		seg[k] = (rad_vis_seg){a[k], r.n, b[(k * 37) % 256], c.n};
+	int blocked = 0, used = 0;
+	for (int n = 0; n <= 40; n++) {
+		rad_vis_segments(s->vis, seg + used, n, open);
+		for (int k = 0; k < n; k++) {
+			const rad_vis_seg *g = &seg[used + k];
+			int one = rad_vis_segment(s->vis, g->a, &g->na, g->b,
+			                          &g->nb);
+			assert_int_equal(open[k], one);
+			blocked += !one;
+		}
+		used = (used + n) % 200;
+	}
+	assert_true(blocked > 0); /* the plate hides some of them */
+	/* Cover: 0.6 m reaches the plate from the floor, 0.4 m does not. */
+	static unsigned char cov[256];
+	for (int n = 0; n <= 256; n += n < 39 ? 13 : 256 - 39) {
+		rad_vis_covered_n(s->vis, r.n, 0.6, a, n, cov);
+		int hidden = 0;
+		for (int k = 0; k < n; k++) {
+			assert_int_equal(cov[k], rad_vis_covered(s->vis, a[k],
+			                                         r.n, 0.6));
+			hidden += cov[k];
+		}
+		rad_vis_covered_n(s->vis, r.n, 0.4, a, n, cov);
+		for (int k = 0; k < n; k++)
+			assert_int_equal(cov[k], 0);
+		if (n == 256)
+			assert_true(hidden > 0 && hidden < n);
+	}
+	rad_scene_free(s);
 }
 
 /* ------------------------------------------------------------------ lights */
@@ -1246,6 +1309,7 @@ int main(void)
 	        cmocka_unit_test(test_vis_partly_hidden_source_weighted),
 	        cmocka_unit_test(test_vis_aliased_zero_rechecked),
 	        cmocka_unit_test(test_vis_no_self_occlusion_at_any_scale),
+	        cmocka_unit_test(test_vis_packets_answer_as_single_rays),
 	        cmocka_unit_test(test_light_point_inverse_square),
 	        cmocka_unit_test(test_light_spot_cone_edges),
 	        cmocka_unit_test(test_light_directional_cosine_and_shadow),
