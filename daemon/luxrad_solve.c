@@ -584,8 +584,7 @@ int main(int argc, char **argv)
 		cli_print_help(&a);
 		return EXIT_OKAY;
 	}
-	if (a.compact_bvh)
-		rad_bvh_set_mode(RAD_BVH_COMPACT);
+	rad_bvh_set_mode(a.bvh);
 	if (a.points_path)
 		rc = tool_points_load(PROG, a.points_path, &pl.xyz, &pl.n);
 	if (rc == EXIT_OKAY)

@@ -23,7 +23,8 @@ typedef struct cli_args {
 	uint32_t audit_every;       /* > 0: audit one link in this many */
 	int json;                   /* one JSON object on stdout */
 	int per_iteration;          /* a stats line on stderr after each step */
-	int compact_bvh;            /* RAD_BVH_COMPACT */
+	rad_bvh_mode bvh;           /* --bvh (default RAD_BVH_COMPACT) */
+	int compact_bvh;            /* --compact-bvh: --bvh compact */
 	int help;
 	int given[RAD_NOPTIONS]; /* engine options seen on the line */
 	int reparse;             /* cli_parse's second pass (--accuracy) */

@@ -27,11 +27,14 @@
  * - Vertices are relative to the scene's origin (scene.h), and so are
  *   the rays: a scene far from 0 is traced at the precision of one near
  *   it.
- * - The layout (rad_bvh_set_mode): Embree's default, or compact, whose
- *   leaves index our shared vertices instead of holding copies.  Same
- *   hits, so the same results to the bit.  Measured, 2 threads, 4
- *   iterations of hr: the grand hall's BVH 20.0 -> 10.5 MB, solve 2.71
- *   -> 2.92 s; the hospital room's 2.8 -> 1.5 MB, 3.17 -> 3.40 s.
+ * - The layout (rad_bvh_set_mode): compact, whose leaves index our
+ *   shared vertices instead of holding copies, or Embree's default
+ *   (fast).  Same hits, so the same results to the bit.  Measured, 2
+ *   threads, 4 iterations of hr, rays one by one: the grand hall's BVH
+ *   10.5 MB compact, 20.0 MB fast, solve 2.92 -> 2.71 s; the hospital
+ *   room's 1.5 and 2.8 MB, 3.40 -> 3.17 s.  With packets (below) fast
+ *   saved 2-10 % of whole runs, so compact is the default: the 1M
+ *   field's BVH is 41.6 MB where fast's is 71.4.
  * - Packets.  The rays of one form factor run from a few points to a few
  *   points, so they go down the same BVH nodes: the callers that trace
  *   several at once (a form factor's point pairs, an element's cover
@@ -158,7 +161,7 @@ static rad_status embree_fail(rad_vis *v, const char *what, rad_error *err)
 	                v->embree_msg[0] ? v->embree_msg : "no message");
 }
 
-static _Atomic int bvh_mode = RAD_BVH_FAST;
+static _Atomic int bvh_mode = RAD_BVH_COMPACT;
 
 void rad_bvh_set_mode(rad_bvh_mode mode)
 {

@@ -34,7 +34,7 @@ test_help() {
 	expect_exit "--help exits 0" 0
 	# The engine's options (rad.h's table) are checked by test_options.
 	for opt in solver iterations points export json per-iteration \
-		audit-links help; do
+		audit-links bvh help; do
 		grep -qF -- "--$opt" "$TMP/out" || missing="$missing --$opt"
 	done
 	for word in metres lux cd/m2 "Exit status"; do
@@ -75,6 +75,35 @@ test_usage_errors() {
 	expect_exit "accuracy above 0.5 exits 2" 2 "--accuracy"
 	run "$SCENE" --accuracy nan
 	expect_exit "NaN accuracy exits 2" 2 "--accuracy"
+	run "$SCENE" --bvh tiny
+	expect_exit "unknown BVH layout exits 2" 2 "tiny"
+	run "$SCENE" --bvh fast --compact-bvh
+	expect_exit "two BVH layouts exit 2" 2 "give one"
+}
+
+# --bvh: compact by default (--compact-bvh says the same), fast holds
+# more; the lux and the rest of the JSON the same to the bit.
+test_bvh_layouts() {
+	local args=(--json --iterations 2 --threads 1 --points "$TMP/good.pts")
+	run "$SCENE" "${args[@]}"
+	cp "$TMP/out" "$TMP/b0.json"
+	run "$SCENE" "${args[@]}" --compact-bvh
+	cp "$TMP/out" "$TMP/b1.json"
+	run "$SCENE" "${args[@]}" --bvh fast
+	cp "$TMP/out" "$TMP/b2.json"
+	if "$PY" - "$TMP/b0.json" "$TMP/b1.json" "$TMP/b2.json" \
+		>"$TMP/err" 2>&1 <<'EOF'; then
+import json, sys
+d, c, f = (json.load(open(p)) for p in sys.argv[1:4])
+bvh = lambda j: j["stats"]["memory"]["by_kind"]["bvh"]
+assert bvh(d) == bvh(c) and bvh(f) > bvh(d) > 0, (bvh(d), bvh(c), bvh(f))
+assert d["illuminance_lux"] == c["illuminance_lux"] == f["illuminance_lux"]
+assert d["stats"]["links"] == f["stats"]["links"]
+EOF
+		pass "--bvh: compact by default, fast larger, the same lux"
+	else
+		fail "--bvh layouts: $(cat "$TMP/err")"
+	fi
 }
 
 # --accuracy sets eps, the convergence and query tolerances together; an
@@ -275,6 +304,7 @@ test_usage_errors
 test_accuracy
 test_file_errors
 test_solve_json
+test_bvh_layouts
 test_glb
 test_solve_text
 test_audit

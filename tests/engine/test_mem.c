@@ -1345,6 +1345,8 @@ static void test_compact_bvh_same_results(void **state)
 	(void)state;
 	double lux[2][2];
 	int64_t bvh[2];
+	rad_bvh_mode was = rad_bvh_get_mode();
+	assert_int_equal(was, RAD_BVH_COMPACT); /* the default */
 	for (int k = 0; k < 2; k++) {
 		rad_bvh_set_mode(k ? RAD_BVH_COMPACT : RAD_BVH_FAST);
 		rad_scene *s = NULL;
@@ -1368,7 +1370,7 @@ static void test_compact_bvh_same_results(void **state)
 		rad_solver_free(sv);
 		rad_scene_free(s);
 	}
-	rad_bvh_set_mode(RAD_BVH_FAST);
+	rad_bvh_set_mode(was);
 	print_message("BVH %lld bytes, compact %lld\n", (long long)bvh[0],
 	              (long long)bvh[1]);
 	assert_true(bvh[1] < bvh[0]);

@@ -18,6 +18,7 @@
 #include <cmocka.h>
 
 #include "config.h"
+#include "rad.h"
 
 static char tmpdir[] = "/tmp/luxrad-test-config.XXXXXX";
 
@@ -109,7 +110,7 @@ static void test_defaults_match_the_header(void **state)
 	assert_int_equal(c.max_output_bytes, 8u << 20);
 	assert_true(c.checkpoint_interval_s == 30);
 	assert_int_equal(c.job_memory_budget, 0);
-	assert_int_equal(c.bvh, 0);
+	assert_int_equal(c.bvh, RAD_BVH_COMPACT);
 	char msg[512];
 	assert_int_equal(srv_config_check(&c, msg, sizeof(msg)), 0);
 }

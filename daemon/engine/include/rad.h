@@ -138,10 +138,10 @@ uint64_t rad_mem_limit_refusals(void);
  * How the scenes committed from now on lay out their BVH, process-wide.
  * RAD_BVH_FAST is Embree's default (triangles copied into its leaves);
  * RAD_BVH_COMPACT keeps indices into the vertex buffer the engine shares
- * with Embree (RTC_SCENE_FLAG_COMPACT).  The rays find the same hits
- * either way, so results are the same to the bit; compact trades ray
- * speed for memory (README, "Memory accounting": measured on the grand
- * hall and the 1M-triangle field).
+ * with Embree (RTC_SCENE_FLAG_COMPACT), the default.  The rays find the
+ * same hits either way, so results are the same to the bit; fast trades
+ * memory for ray speed (README, "Memory accounting": measured on the
+ * grand hall, the real rooms and the 1M-triangle field).
  */
 typedef enum rad_bvh_mode { RAD_BVH_FAST = 0, RAD_BVH_COMPACT } rad_bvh_mode;
 #define RAD_BVH_CHOICES "fast", "compact"

@@ -60,7 +60,7 @@ typedef struct srv_config {
 	                             workers, at least 1 */
 	int query_threads;        /* threads answering queries; default 2 */
 	srv_isolation isolation;  /* where solvers run; default process */
-	int bvh; /* scenes' BVH layout, a rad_bvh_mode; default fast */
+	int bvh; /* scenes' BVH layout, a rad_bvh_mode; default compact */
 	double solver_stop_timeout_s; /* a solver process asked to stop is
 	                                 killed after this; 0 = never */
 	double accuracy;              /* jobs' default accuracy (rad_options) */
