@@ -82,7 +82,9 @@ test_usage_errors() {
 }
 
 # --bvh: compact by default (--compact-bvh says the same), fast holds
-# more; the lux and the rest of the JSON the same to the bit.
+# more; the lux and the links the same to the bit.  Embree's builder
+# threads make its byte count move by a few bytes from run to run (3,992
+# and 4,008 for the same layout), so the layouts are told apart by size.
 test_bvh_layouts() {
 	local args=(--json --iterations 2 --threads 1 --points "$TMP/good.pts")
 	run "$SCENE" "${args[@]}"
@@ -96,7 +98,8 @@ test_bvh_layouts() {
 import json, sys
 d, c, f = (json.load(open(p)) for p in sys.argv[1:4])
 bvh = lambda j: j["stats"]["memory"]["by_kind"]["bvh"]
-assert bvh(d) == bvh(c) and bvh(f) > bvh(d) > 0, (bvh(d), bvh(c), bvh(f))
+assert 0 < bvh(d) < 1.05 * bvh(c) and bvh(c) < 1.05 * bvh(d), (bvh(d), bvh(c))
+assert bvh(f) > 1.1 * max(bvh(d), bvh(c)), (bvh(d), bvh(c), bvh(f))
 assert d["illuminance_lux"] == c["illuminance_lux"] == f["illuminance_lux"]
 assert d["stats"]["links"] == f["stats"]["links"]
 EOF
