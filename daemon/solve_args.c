@@ -208,17 +208,18 @@ static int tool_set(const tool_option *o, const char *value, cli_args *a,
 			                   "progressive, hr or rmb)",
 			                   o->name, value);
 		return EXIT_OKAY;
-	case T_BVH:
-		if (!strcmp(value, "compact"))
-			*(rad_bvh_mode *)p = RAD_BVH_COMPACT;
-		else if (!strcmp(value, "fast"))
-			*(rad_bvh_mode *)p = RAD_BVH_FAST;
-		else
-			return rp_cli_fail(msg, len,
-			                   "--%s: unknown layout '%s' (compact "
-			                   "or fast)",
-			                   o->name, value);
-		return EXIT_OKAY;
+	case T_BVH: {
+		static const char *const names[] = {RAD_BVH_CHOICES};
+		for (size_t i = 0; i < sizeof(names) / sizeof(names[0]); i++)
+			if (!strcmp(value, names[i])) {
+				*(rad_bvh_mode *)p = (rad_bvh_mode)i;
+				return EXIT_OKAY;
+			}
+		return rp_cli_fail(msg, len,
+		                   "--%s: unknown layout '%s' (compact or "
+		                   "fast)",
+		                   o->name, value);
+	}
 	case T_U32:
 		if (rp_cli_double(value, &v) != 0 || v < 1 || v > 1e9 ||
 		    v != floor(v))
@@ -306,18 +307,22 @@ static int parse_line(int argc, char **argv, cli_args *a)
 	return rc;
 }
 
-int cli_parse(int argc, char **argv, cli_args *a)
+/* *a with nothing given: every default. */
+static void args_default(cli_args *a)
 {
 	memset(a, 0, sizeof(*a));
 	rad_options_default(&a->opt);
-	a->bvh = RAD_BVH_COMPACT;
+	a->bvh = RAD_BVH_DEFAULT;
+}
+
+int cli_parse(int argc, char **argv, cli_args *a)
+{
+	args_default(a);
 	int rc = parse_line(argc, argv, a);
 	if (rc != EXIT_OKAY || a->help || !a->given[RAD_OPT_accuracy])
 		return rc;
 	double accuracy = a->opt.accuracy;
-	memset(a, 0, sizeof(*a));
-	rad_options_default(&a->opt);
-	a->bvh = RAD_BVH_COMPACT;
+	args_default(a);
 	rad_options_accuracy(&a->opt, accuracy, NULL);
 	a->reparse = 1;
 	return parse_line(argc, argv, a);

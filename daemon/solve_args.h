@@ -23,7 +23,7 @@ typedef struct cli_args {
 	uint32_t audit_every;       /* > 0: audit one link in this many */
 	int json;                   /* one JSON object on stdout */
 	int per_iteration;          /* a stats line on stderr after each step */
-	rad_bvh_mode bvh;           /* --bvh (default RAD_BVH_COMPACT) */
+	rad_bvh_mode bvh;           /* --bvh (default RAD_BVH_DEFAULT) */
 	int compact_bvh;            /* --compact-bvh: --bvh compact */
 	int help;
 	int given[RAD_NOPTIONS]; /* engine options seen on the line */

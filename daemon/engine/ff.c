@@ -480,8 +480,7 @@ static double ff_sampled(const rad_vis *vis, const rad_patch *r,
                          int ny, double rcover, uint64_t *rays, double *spread,
                          int *front)
 {
-	v3 clip[5], csum[RAD_FF_MAX_SAMPLES];
-	int cn[RAD_FF_MAX_SAMPLES];
+	v3 clip[5];
 	double f[RAD_FF_MAX_SAMPLES];
 	int end[RAD_FF_MAX_SAMPLES], n = 0;
 	uint64_t tried = 0;
@@ -491,13 +490,8 @@ static double ff_sampled(const rad_vis *vis, const rad_patch *r,
 		int m;
 		f[k] = point_ff(xs[k], r->n, s, clip, &m);
 		*front |= f[k] > 0;
-		if (f[k] > 0 && vis) {
-			csum[k] = v3_make(0, 0, 0);
-			for (int i = 0; i < m; i++)
-				csum[k] = v3_add(csum[k], clip[i]);
-			cn[k] = m;
+		if (f[k] > 0 && vis)
 			n = add_rays(&vr, n, xs[k], r->n, s, ys, ny, &tried);
-		}
 		end[k] = n;
 	}
 	if (n > 0)
@@ -515,10 +509,16 @@ static double ff_sampled(const rad_vis *vis, const rad_patch *r,
 			f[k] *= seen / all;
 			continue;
 		}
+		/* No source point in front: the clipped polygon's vertex
+		 * mean, asked of point_ff again (rare). */
+		int m;
+		point_ff(xs[k], r->n, s, clip, &m);
+		v3 c = v3_make(0, 0, 0);
+		for (int j = 0; j < m; j++)
+			c = v3_add(c, clip[j]);
 		tried++;
 		f[k] *= rad_vis_segment(vis, xs[k], &r->n,
-		                        v3_madd(xs[k], csum[k], 1.0 / cn[k]),
-		                        &s->n);
+		                        v3_madd(xs[k], c, 1.0 / m), &s->n);
 	}
 	if (rays)
 		*rays += tried;

@@ -161,7 +161,7 @@ static rad_status embree_fail(rad_vis *v, const char *what, rad_error *err)
 	                v->embree_msg[0] ? v->embree_msg : "no message");
 }
 
-static _Atomic int bvh_mode = RAD_BVH_COMPACT;
+static _Atomic int bvh_mode = RAD_BVH_DEFAULT;
 
 void rad_bvh_set_mode(rad_bvh_mode mode)
 {
@@ -444,11 +444,19 @@ void rad_vis_segments(const rad_vis *v, const rad_vis_seg *s, int n,
 	}
 }
 
+/* The ray that decides whether surface point x (normal n) is covered
+ * within dist: from just off the surface, along the normal. */
+static vis_ray cover_ray(const rad_vis *v, v3 x, v3 n, double dist)
+{
+	return (vis_ray){v3_madd(x, n, v->eps), n, v->eps, dist};
+}
+
 int rad_vis_covered(const rad_vis *v, v3 x, v3 n, double dist)
 {
 	if (!(dist > 2.0 * v->eps))
 		return 0;
-	return occluded(v, v3_madd(x, n, v->eps), n, v->eps, dist);
+	vis_ray r = cover_ray(v, x, n, dist);
+	return occluded(v, r.org, r.dir, r.tnear, r.tfar);
 }
 
 void rad_vis_covered_n(const rad_vis *v, v3 n, double dist, const v3 *pts,
@@ -462,8 +470,7 @@ void rad_vis_covered_n(const rad_vis *v, v3 n, double dist, const v3 *pts,
 		int c = count - base < VIS_PACKET ? count - base : VIS_PACKET;
 		vis_ray r[VIS_PACKET];
 		for (int k = 0; k < c; k++)
-			r[k] = (vis_ray){v3_madd(pts[base + k], n, v->eps), n,
-			                 v->eps, dist};
+			r[k] = cover_ray(v, pts[base + k], n, dist);
 		occluded_n(v, r, c, covered + base);
 	}
 }

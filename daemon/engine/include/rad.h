@@ -144,7 +144,8 @@ uint64_t rad_mem_limit_refusals(void);
  * grand hall, the real rooms and the 1M-triangle field).
  */
 typedef enum rad_bvh_mode { RAD_BVH_FAST = 0, RAD_BVH_COMPACT } rad_bvh_mode;
-#define RAD_BVH_CHOICES "fast", "compact"
+#define RAD_BVH_CHOICES "fast", "compact" /* names, in the enum's order */
+#define RAD_BVH_DEFAULT RAD_BVH_COMPACT
 void rad_bvh_set_mode(rad_bvh_mode mode);
 rad_bvh_mode rad_bvh_get_mode(void);
 

@@ -305,7 +305,7 @@ void srv_config_default(srv_config *c)
 	c->max_output_bytes = 8 * MiB;
 	c->memory_limit = 0;
 	c->job_memory_budget = 0;
-	c->bvh = RAD_BVH_COMPACT;
+	c->bvh = RAD_BVH_DEFAULT;
 	c->checkpoint_interval_s = 30;
 	mb_config_default(&c->modbus);
 }
