@@ -98,10 +98,11 @@ static void node_payload(const gather_job *g, uint32_t rcv,
 }
 
 /* I = sum over the node's links of F x B(source), in list order, with
- * the surfaces' part times k (a cluster also records where it came
- * from, hier.h); adds A x the surfaces' part to took. */
+ * the surfaces' part times k (a cluster also records in f where it came
+ * from, hier.h; f is NULL for an element); adds A x the surfaces' part
+ * to took. */
 static void gather_list(gather_job *g, uint32_t rcv, uint32_t head, float I[3],
-                        double took[3])
+                        rad_cluster_flux *f, double took[3])
 {
 	rad_hier *h = g->h;
 	double lit[3] = {0, 0, 0}, surf[3] = {0, 0, 0}, fsum = 0;
@@ -110,18 +111,20 @@ static void gather_list(gather_job *g, uint32_t rcv, uint32_t head, float I[3],
 		int light = node_is_light(l->src);
 		double b[3];
 		double ff = rad_hlink_ff(l);
-		double f = ff * node_sends(h, rcv, l->src, 0, b);
+		double fb = ff * node_sends(h, rcv, l->src, 0, b);
 		double *acc = light ? lit : surf;
 		for (int c = 0; c < 3; c++)
-			acc[c] += f * b[c];
+			acc[c] += fb * b[c];
 		/* Photopic k weighs a surface's share of the direction. */
 		double ks = light ? 1 : g->k[1];
 		if (!light)
 			fsum += ff;
-		node_took(h, rcv, l->src,
-		          ks * f *
-		                  (RAD_LUMA_R * b[0] + RAD_LUMA_G * b[1] +
-		                   RAD_LUMA_B * b[2]));
+		if (f)
+			node_took(h, f, rcv, l->src,
+			          ks * fb *
+			                  (RAD_LUMA_R * b[0] +
+			                   RAD_LUMA_G * b[1] +
+			                   RAD_LUMA_B * b[2]));
 		id = l->next;
 	}
 	double a = node_area(h, rcv);
@@ -140,7 +143,7 @@ static void gather_list(gather_job *g, uint32_t rcv, uint32_t head, float I[3],
 static void gather_tree(gather_job *g, uint32_t id, double took[3])
 {
 	rad_elem *e = rad_elem_at(g->h, id);
-	gather_list(g, id, *rad_node_links(g->h, id), e->I, took);
+	gather_list(g, id, *rad_node_links(g->h, id), e->I, NULL, took);
 	if (e->child != RAD_NONE)
 		for (uint32_t k = 0; k < 4; k++)
 			gather_tree(g, e->child + k, took);
@@ -167,17 +170,106 @@ static void gather_roots(void *ud, size_t b, size_t e, int thread)
 	}
 }
 
+/*
+ * Clusters' flux.  hr's clusters keep no I, V and S (hier.h,
+ * rad_cluster_flux): the push gathers each cluster's links again when it
+ * gets there (push_own), a second walk of the clusters' links, and the
+ * energy bound sums what they took in a walk of its own (clusters_took).
+ * A step that clips carries the row sums down the clusters to the roots,
+ * which the deferred roots of that push could not take, and a budget
+ * cannot make room for them on the step that first clips; so once hr
+ * clips, and under a budget from the start, the clusters keep their flux
+ * as rmb's do and the push reads it.
+ */
+
+/* Cluster id's gather into f (the push's: push_own). */
+static void gather_cluster(gather_job *g, uint32_t id, rad_cluster_flux *f,
+                           double took[3])
+{
+	memset(f, 0, sizeof(*f));
+	gather_list(g, id | RAD_TAG_CLUSTER,
+	            *rad_node_links(g->h, id | RAD_TAG_CLUSTER), f->I, f, took);
+}
+
+/* Cluster id's gather and those of the clusters below it, into their
+ * flux records (h->flux: Clusters' flux above). */
 static void gather_clusters(gather_job *g, uint32_t id, double took[3])
 {
-	rad_cluster *cl = rad_cluster_at(g->h, id);
-	memset(cl->V, 0, sizeof(cl->V));
-	cl->S = 0;
-	gather_list(g, id | RAD_TAG_CLUSTER,
-	            *rad_node_links(g->h, id | RAD_TAG_CLUSTER), cl->I, took);
+	const rad_cluster *cl = rad_cluster_at(g->h, id);
+	gather_cluster(g, id, &g->h->flux[id], took);
 	if (cl->child != RAD_NONE) {
 		gather_clusters(g, cl->child, took);
 		gather_clusters(g, cl->child + 1, took);
 	}
+}
+
+/* The subtrees below TOOK_TASK_DEPTH that clusters_took hands to the
+ * pool's threads (as the push's, hier.c), and what each took. */
+#define TOOK_TASK_DEPTH 6
+typedef struct took_tasks {
+	gather_job *g;
+	uint32_t n, id[1u << TOOK_TASK_DEPTH];
+	double took[1u << TOOK_TASK_DEPTH][3];
+} took_tasks;
+
+/* What cluster id and the clusters below it took from surfaces, as
+ * gather_list adds it: the energy bound is judged before the push, which
+ * then gathers each cluster again (push_own) rather than keep its I, V
+ * and S until then (hier.h, rad_cluster_flux).  With t, the subtrees at
+ * TOOK_TASK_DEPTH are listed in it instead of walked. */
+static void clusters_took(gather_job *g, uint32_t id, unsigned depth,
+                          took_tasks *t, double took[3])
+{
+	const rad_hier *h = g->h;
+	uint32_t rcv = id | RAD_TAG_CLUSTER;
+	const rad_cluster *cl = rad_cluster_at(h, id);
+	if (t && depth == TOOK_TASK_DEPTH && cl->child != RAD_NONE) {
+		t->id[t->n++] = id;
+		return;
+	}
+	double surf[3] = {0, 0, 0};
+	for (uint32_t l = *rad_node_links(h, rcv); l != RAD_NONE;) {
+		const rad_hlink *k = rad_hlink_at(h, l);
+		if (!node_is_light(k->src)) {
+			double b[3];
+			double fb = rad_hlink_ff(k) *
+			            node_sends(h, rcv, k->src, 0, b);
+			for (int c = 0; c < 3; c++)
+				surf[c] += fb * b[c];
+		}
+		l = k->next;
+	}
+	double a = node_area(h, rcv);
+	for (int c = 0; c < 3; c++)
+		took[c] += a * g->k[c] * surf[c];
+	if (cl->child != RAD_NONE) {
+		clusters_took(g, cl->child, depth + 1, t, took);
+		clusters_took(g, cl->child + 1, depth + 1, t, took);
+	}
+}
+
+static void took_subtrees(void *ud, size_t b, size_t e, int thread)
+{
+	took_tasks *t = ud;
+	(void)thread;
+	for (size_t i = b; i < e; i++)
+		clusters_took(t->g, t->id[i], TOOK_TASK_DEPTH, NULL,
+		              t->took[i]);
+}
+
+/* clusters_took over the whole tree, the subtrees on par's threads; the
+ * sum in a fixed order (the nodes above them, then each in turn). */
+static void clusters_took_par(rad_par *par, gather_job *g, double took[3])
+{
+	took_tasks t;
+	t.g = g;
+	t.n = 0;
+	clusters_took(g, 0, 0, &t, took);
+	memset(t.took, 0, t.n * sizeof(t.took[0]));
+	rad_par_for(par, t.n, 1, took_subtrees, &t);
+	for (uint32_t i = 0; i < t.n; i++)
+		for (int c = 0; c < 3; c++)
+			took[c] += t.took[i][c];
 }
 
 /* One pass of the gather over every node; returns in got what surfaces
@@ -186,7 +278,10 @@ static void gather_pass(rad_solver *sv, gather_job *g, double got[3])
 {
 	uint32_t np = sv->scene->npolys;
 	got[0] = got[1] = got[2] = 0;
-	gather_clusters(g, 0, got);
+	if (g->h->flux)
+		gather_clusters(g, 0, got);
+	else
+		clusters_took_par(sv->par, g, got);
 	size_t nslots = ((size_t)np + GATHER_GRAIN - 1) / GATHER_GRAIN;
 	memset(g->took, 0, nslots * 3 * sizeof(double));
 	rad_par_for(sv->par, np, GATHER_GRAIN, gather_roots, g);
@@ -233,6 +328,14 @@ static const float *push_extra(const rad_hier *h, uint32_t t, void *ud)
 	return acc->x;
 }
 
+static void push_own(rad_hier *h, uint32_t id, rad_cluster_flux *out, void *ud)
+{
+	push_acc *acc = ud;
+	double took[3] = {0, 0, 0}; /* counted by clusters_took */
+	(void)h;
+	gather_cluster(acc->g, id, out, took);
+}
+
 /* A leaf's update: B = E + rho I (with clip, I from surfaces over the
  * leaf's gain where it passes 1: node_payload). */
 static void update_leaf(rad_hier *h, uint32_t id, rad_elem *e, const float *x,
@@ -259,11 +362,12 @@ static void update_leaf(rad_hier *h, uint32_t id, rad_elem *e, const float *x,
 }
 
 /* Push irradiance down, update the leaves, pull; returns the residual. */
-static double push_and_update(rad_hier *h, gather_job *g, double *mean_B,
-                              double chg[3])
+static double push_and_update(rad_hier *h, rad_par *par, gather_job *g,
+                              double *mean_B, double chg[3])
 {
 	push_acc acc = {0, 0, {0, 0, 0}, g, {0}};
-	rad_hier_push(h, update_leaf, g->clip ? push_extra : NULL, &acc);
+	rad_hier_push(h, update_leaf, g->clip ? push_extra : NULL,
+	              h->flux ? NULL : push_own, &acc, par);
 	rad_hier_pull(h);
 	*mean_B = acc.total / h->scene->total_area;
 	memcpy(chg, acc.chg, sizeof(acc.chg));
@@ -425,6 +529,8 @@ static rad_status hr_init(rad_solver *sv, rad_error *err)
 	sv->impl = st;
 	/* As rmb_init: a budget the first step cannot start in is refused. */
 	st->wave.reserve = gather_reserve;
+	if (sv->mem.budget && rad_hier_keep_flux(&sv->h, err))
+		return RAD_ERR_NOMEM;
 	return wave_start_room(sv, &st->wave, err);
 }
 
@@ -510,7 +616,7 @@ static rad_status hr_step(rad_solver *sv, rad_error *err)
 		return wave_failed(sv, RAD_ERR_NOMEM, err);
 	}
 	memmove(st->chg[1], st->chg[0], 2 * sizeof(st->chg[0]));
-	double r = push_and_update(h, &g, &st->mean_B, st->chg[0]);
+	double r = push_and_update(h, sv->par, &g, &st->mean_B, st->chg[0]);
 	/* After a jump the residual is what the tail missed; it shrinks no
 	 * slower than the rate jumped over until shown otherwise, so the
 	 * error estimate is never made from a faster one. */
@@ -534,8 +640,11 @@ static rad_status hr_step(rad_solver *sv, rad_error *err)
 	 * (node_extra), which makes the iteration a contraction. */
 	if (sv->stats.iteration >= 2 && r > st->last_r &&
 	    !(st->q_jump > 0 && st->since <= 1)) {
-		if (st->frozen)
+		if (st->frozen && !st->clip) {
 			st->clip = 1;
+			if (rad_hier_keep_flux(&sv->h, err))
+				return RAD_ERR_NOMEM;
+		}
 		st->frozen = 1;
 	}
 	st->last_r = r;

@@ -365,9 +365,10 @@ static int link_dir(const rad_hier *h, uint32_t from, uint32_t to, v3 *u)
 	return 1;
 }
 
-void node_took(rad_hier *h, uint32_t rcv, uint32_t src, double e)
+void node_took(const rad_hier *h, rad_cluster_flux *f, uint32_t rcv,
+               uint32_t src, double e)
 {
-	if (!node_is_cluster(rcv) || e == 0)
+	if (!f || e == 0)
 		return;
 	v3 u = v3_make(0, 0, 0);
 	/* e is power per unit of the cluster's area: normal irradiance is
@@ -376,7 +377,7 @@ void node_took(rad_hier *h, uint32_t rcv, uint32_t src, double e)
 	double take = 0.25;
 	if (link_dir(h, rcv, src, &u))
 		take = fmax(1.0 / 16, cluster_take(h, rcv, u));
-	rad_cluster_took(rad_cluster_at(h, rcv), e / take, u.x, u.y, u.z);
+	rad_cluster_took(f, e / take, u.x, u.y, u.z);
 }
 
 /* The emission factor of cluster src towards rcv, of B (mean B) and nB

@@ -111,10 +111,12 @@ double node_sends(const rad_hier *h, uint32_t rcv, uint32_t src, int delta,
                   double out[3]);
 /*
  * After a gather of photopic value e (power per unit area) by a cluster
- * receiver from src: record its direction for the push (hier.h).  Does
- * nothing for a surface receiver.  Not thread-safe per receiver.
+ * receiver from src: record its direction for the push in the cluster's
+ * flux f (hier.h).  Does nothing for a surface receiver (f NULL).  Not
+ * thread-safe per receiver.
  */
-void node_took(rad_hier *h, uint32_t rcv, uint32_t src, double e);
+void node_took(const rad_hier *h, rad_cluster_flux *f, uint32_t rcv,
+               uint32_t src, double e);
 /*
  * Energy bound shared by hr and rmb: what receivers took from surfaces in
  * one step (got, A I per channel) against what the polygons sent (their

@@ -69,10 +69,8 @@ static void hold_leaf(rad_hier *h, uint32_t id, rad_elem *e, double P[3])
 static void zero_I(rad_hier *h, uint32_t t, double *held)
 {
 	if (node_is_cluster(t)) {
-		rad_cluster *c = rad_cluster_at(h, t);
-		memset(c->I, 0, sizeof(c->I));
-		memset(c->V, 0, sizeof(c->V));
-		c->S = 0;
+		const rad_cluster *c = rad_cluster_at(h, t);
+		memset(&h->flux[t & ~RAD_TAG_MASK], 0, sizeof(*h->flux));
 		if (c->child != RAD_NONE) {
 			zero_I(h, (c->child) | RAD_TAG_CLUSTER, held);
 			zero_I(h, (c->child + 1) | RAD_TAG_CLUSTER, held);
@@ -119,8 +117,9 @@ static void cluster_power(const rad_hier *h, uint32_t id, double P[3])
 {
 	const rad_cluster *c = rad_cluster_at(h, id);
 	/* A cluster's I is the mean over its area (hier.h): power A I. */
+	const float *I = h->flux[id & ~RAD_TAG_MASK].I;
 	for (int k = 0; k < 3; k++)
-		P[k] += (double)c->area * c->I[k];
+		P[k] += (double)c->area * I[k];
 	if (c->child != RAD_NONE) {
 		cluster_power(h, c->child | RAD_TAG_CLUSTER, P);
 		cluster_power(h, (c->child + 1) | RAD_TAG_CLUSTER, P);
@@ -130,9 +129,10 @@ static void cluster_power(const rad_hier *h, uint32_t id, double P[3])
 static void scale_I(rad_hier *h, uint32_t t, const double k[3])
 {
 	if (node_is_cluster(t)) {
-		rad_cluster *c = rad_cluster_at(h, t);
+		const rad_cluster *c = rad_cluster_at(h, t);
+		float *I = h->flux[t & ~RAD_TAG_MASK].I;
 		for (int i = 0; i < 3; i++)
-			c->I[i] = (float)(c->I[i] * k[i]);
+			I[i] = (float)(I[i] * k[i]);
 		if (c->child != RAD_NONE) {
 			scale_I(h, c->child | RAD_TAG_CLUSTER, k);
 			scale_I(h, (c->child + 1) | RAD_TAG_CLUSTER, k);
@@ -308,6 +308,8 @@ static rad_status rmb_init(rad_solver *sv, rad_error *err)
 	                            sizeof(float));
 	if (rs || !st->black || !st->arefl || !st->rhomax)
 		return rad_fail(err, RAD_ERR_NOMEM, "rmb: out of memory");
+	if ((rs = rad_hier_keep_flux(&sv->h, err)))
+		return rs;
 	/* A budget the first step's reserve and a block of each pool do not
 	 * fit in is refused with the hierarchy's (rad_solver_new), not by
 	 * that step. */
@@ -370,7 +372,7 @@ static rad_status rmb_step(rad_solver *sv, rad_error *err)
 		        sv->opt.delay *
 		        (st->iter == 0 ? sv->flux_scale / sv->scene->total_area
 		                       : st->mean_dB);
-	rad_hier_push(h, update_leaf, NULL, &acc);
+	rad_hier_push(h, update_leaf, NULL, NULL, &acc, NULL);
 	rad_hier_pull(h);
 	memmove(st->chg[1], st->chg[0], 2 * sizeof(st->chg[0]));
 	memcpy(st->chg[0], acc.chg, sizeof(acc.chg));

@@ -297,11 +297,12 @@ static rad_status gather(rad_solver *sv, uint32_t r, uint32_t s, double ff,
 	double fe = ff * node_sends(&sv->h, r, s, 1, d);
 	if (!node_is_cluster(s))
 		node_dB(sv, s, d);
-	float *I = node_is_cluster(r) ? rad_cluster_at(&sv->h, r)->I
-	                              : rad_elem_at(&sv->h, r)->I;
+	rad_cluster_flux *f =
+	        node_is_cluster(r) ? &sv->h.flux[r & ~RAD_TAG_MASK] : NULL;
+	float *I = f ? f->I : rad_elem_at(&sv->h, r)->I;
 	for (int c = 0; c < 3; c++)
 		I[c] += (float)(fe * d[c]);
-	node_took(&sv->h, r, s, fe * rad_luma3(d));
+	node_took(&sv->h, f, r, s, fe * rad_luma3(d));
 	double b = fabs(rad_luma3(d));
 	if (!node_is_cluster(r)) {
 		rad_status rs = track_err(sv, st, r, link_err(sv, b, spread));

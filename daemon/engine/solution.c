@@ -35,7 +35,7 @@
 
 #define SOL_MAGIC 0x534c5852u /* "RXLS" little-endian: "luxrad solution" */
 #define SOL_VERSION                                                            \
-	12u /* 2: clusters carry their orientation moments; 3:                 \
+	13u /* 2: clusters carry their orientation moments; 3:                 \
 	     * and where their irradiance came from; 4: elements their         \
 	     * exposed fraction (hier.h, Covered parts); 5: their path, not    \
 	     * their region (hier.h, Regions); 6: clusters no parent; 7: nor   \
@@ -46,7 +46,8 @@
 	     * sibling run and the roots' exposed fractions, after the         \
 	     * elements (hier.h, Runs; written as 10, the element size         \
 	     * telling it apart); 12: an element's dB packed, 32-byte          \
-	     * records (hier.h, Increments) */
+	     * records (hier.h, Increments); 13: clusters without I, V and S   \
+	     * (hier.h, rad_cluster_flux), 76-byte records */
 
 struct rad_solution {
 	const rad_scene *scene;
@@ -484,8 +485,8 @@ static rad_status check_clusters(rad_solution *s, uint32_t np, uint32_t nc,
 		const rad_cluster *c = &a[i];
 		if ((i > 0 && !seen[i]) || c->first > np ||
 		    c->count > np - c->first || !finite3(c->lo) ||
-		    !finite3(c->hi) || !finite3(c->B) || !finite3(c->I) ||
-		    !finite3(c->nB) || !isfinite(c->area))
+		    !finite3(c->hi) || !finite3(c->B) || !finite3(c->nB) ||
+		    !isfinite(c->area))
 			return rad_fail(err, RAD_ERR_INVALID,
 			                "solution: cluster %u is damaged", i);
 		if (c->child == RAD_NONE)

@@ -1378,6 +1378,74 @@ static void test_compact_bvh_same_results(void **state)
 }
 
 /*
+ * hr's clusters keep no flux (hr.c, DESIGN, clusters' flux): the push
+ * gathers each cluster again, its subtrees on the pool's threads, and
+ * updates the leaves after the last cluster.  The solution is the same,
+ * bit for bit, as when the clusters keep what they gathered (as they do
+ * under a memory budget, here one that is never reached), on one thread
+ * and on two; and the clusters hold 28 bytes less each.
+ */
+static void test_hr_regathers_clusters(void **state)
+{
+	(void)state;
+	rad_scene *s = grid_room(16);
+	uint32_t np = s->npolys;
+	float *B[3];
+	double lux[3][2];
+	int64_t clusters[3];
+	uint32_t nc = 0;
+	const double pts[12] = {0.5, 1e-3, 0.5, 0, 1, 0,
+	                        0.1, 1e-3, 0.2, 0, 1, 0};
+	for (int k = 0; k < 3; k++) {
+		rad_options o;
+		rad_error err;
+		rad_solver *sv = NULL;
+		rad_options_default(&o);
+		o.solver = RAD_SOLVER_HR;
+		o.threads = k == 2 ? 2 : 1;
+		if (k == 1)
+			o.memory_budget = 4096; /* MiB: never reached */
+		assert_int_equal(rad_solver_new(s, &o, &sv, &err), RAD_OK);
+		for (int i = 0; i < 4; i++)
+			assert_int_equal(rad_solver_step(sv, &err), RAD_OK);
+		assert_true((sv->h.flux != NULL) == (k == 1));
+		rad_stats st;
+		rad_solver_stats(sv, &st);
+		assert_false(st.budget_reached);
+		nc = sv->h.clusters.count;
+		rad_mem_report r;
+		rad_solver_memory(sv, &r);
+		clusters[k] = r.bytes[RAD_MEM_ELEM_CLUSTER];
+		B[k] = malloc(3 * (size_t)np * sizeof(float));
+		assert_non_null(B[k]);
+		for (uint32_t j = 0; j < np; j++)
+			memcpy(B[k] + 3 * (size_t)j, rad_elem_at(&sv->h, j)->B,
+			       3 * sizeof(float));
+		assert_int_equal(
+		        rad_solver_illuminance(sv, pts, 2, lux[k], &err),
+		        RAD_OK);
+		rad_solver_free(sv);
+	}
+	print_message("clusters %lld bytes, keeping their flux %lld; "
+	              "lux %.6g %.6g\n",
+	              (long long)clusters[0], (long long)clusters[1], lux[0][0],
+	              lux[0][1]);
+	assert_true(lux[0][0] > 0 && lux[0][1] > 0);
+	for (int k = 1; k < 3; k++) {
+		assert_memory_equal(B[0], B[k], 3 * (size_t)np * sizeof(float));
+		assert_memory_equal(lux[0], lux[k], sizeof(lux[0]));
+	}
+	assert_true(nc > 1u << 7); /* deeper than the push's tasks */
+	/* What the allocator holds for the array: a few bytes of rounding. */
+	int64_t flux = (int64_t)nc * (int64_t)sizeof(rad_cluster_flux);
+	assert_true(clusters[1] - clusters[0] >= flux &&
+	            clusters[1] - clusters[0] < flux + 64);
+	for (int k = 0; k < 3; k++)
+		free(B[k]);
+	rad_scene_free(s);
+}
+
+/*
  * One limit over two processes: a child process shares a counter page
  * with its parent, builds a scene and dies without freeing it (as a
  * crashed solver process would).  Its bytes are seen in the page while
@@ -1472,6 +1540,7 @@ int main(void)
 	        cmocka_unit_test(test_budget_restart),
 	        cmocka_unit_test(test_wave_lists),
 	        cmocka_unit_test(test_cluster_light_by_kind),
+	        cmocka_unit_test(test_hr_regathers_clusters),
 	        cmocka_unit_test(test_cluster_leaves_full),
 	        cmocka_unit_test(test_census),
 	        cmocka_unit_test(test_compact_bvh_same_results),
