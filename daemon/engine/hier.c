@@ -544,6 +544,7 @@ void rad_hier_destroy(rad_hier *h)
 	h->ninner = 0;
 	rad_mem_free(h->mem, RAD_MEM_ELEM_CLUSTER, h->flux);
 	h->flux = NULL;
+	rad_hier_drop_deltas(h);
 }
 
 rad_status rad_hier_keep_flux(rad_hier *h, rad_error *err)
@@ -842,16 +843,56 @@ static void leaf_sums(const rad_hier *h, const rad_cluster *cl, double acc[6],
 	}
 }
 
+/* dB and ndB of inner cluster cl from its children's, as pull_cluster
+ * sums them; for every inner cluster of the subtree, into out
+ * (rad_hier_keep_deltas) and luma(dB) into luma (rad_hier_delta_lumas)
+ * too, either when not NULL. */
+static void pull_deltas(const rad_hier *h, const rad_cluster *cl, float dB[3],
+                        float ndB[3], rad_cluster_deltas *out, double *luma)
+{
+	double acc[3] = {0, 0, 0}, nb[3] = {0, 0, 0};
+	for (uint32_t k = 0; k < 2; k++) {
+		const rad_cluster *ch = rad_cluster_at(h, cl->child + k);
+		float cdB[3], cndB[3];
+		if (ch->child != RAD_NONE)
+			pull_deltas(h, ch, cdB, cndB, out, luma);
+		else
+			rad_cluster_delta(h, ch, cdB, cndB);
+		for (int c = 0; c < 3; c++) {
+			acc[c] += (double)ch->area * cdB[c];
+			nb[c] += cndB[c];
+		}
+	}
+	for (int c = 0; c < 3; c++) {
+		dB[c] = cl->area > 0 ? (float)(acc[c] / cl->area) : 0;
+		ndB[c] = (float)nb[c];
+	}
+	if (out) {
+		rad_cluster_deltas *d = &out[rad_cluster_inner_index(cl)];
+		memcpy(d->dB, dB, sizeof(d->dB));
+		memcpy(d->ndB, ndB, sizeof(d->ndB));
+	}
+	if (luma)
+		luma[rad_cluster_inner_index(cl)] = rad_luma(dB);
+}
+
 void rad_cluster_delta(const rad_hier *h, const rad_cluster *cl, float dB[3],
                        float ndB[3])
 {
 	if (cl->child != RAD_NONE) {
-		const rad_cluster_inner *in =
-		        &h->inner[rad_cluster_inner_index(cl)];
+		float d[3], nd[3];
+		if (h->deltas) {
+			const rad_cluster_deltas *k =
+			        &h->deltas[rad_cluster_inner_index(cl)];
+			memcpy(d, k->dB, sizeof(d));
+			memcpy(nd, k->ndB, sizeof(nd));
+		} else {
+			pull_deltas(h, cl, d, nd, NULL, NULL);
+		}
 		if (dB)
-			memcpy(dB, in->dB, sizeof(in->dB));
+			memcpy(dB, d, sizeof(d));
 		if (ndB)
-			memcpy(ndB, in->ndB, sizeof(in->ndB));
+			memcpy(ndB, nd, sizeof(nd));
 		return;
 	}
 	/* leaf_sums' dB and ndB alone: the same sums in the same order */
@@ -875,6 +916,41 @@ void rad_cluster_delta(const rad_hier *h, const rad_cluster *cl, float dB[3],
 		if (ndB)
 			ndB[c] = (float)nb[c];
 	}
+}
+
+rad_status rad_hier_keep_deltas(rad_hier *h, rad_error *err)
+{
+	if (!h->deltas) {
+		rad_cluster_deltas *d =
+		        rad_mem_alloc(h->mem, RAD_MEM_ELEM_CLUSTER,
+		                      h->ninner * sizeof(*h->deltas));
+		if (!d)
+			return rad_fail(err, RAD_ERR_NOMEM,
+			                "hierarchy: out of memory (clusters' "
+			                "increments)");
+		memset(d, 0, h->ninner * sizeof(*d));
+		const rad_cluster *root = rad_cluster_at(h, 0);
+		if (root->child != RAD_NONE) {
+			float dB[3], ndB[3];
+			pull_deltas(h, root, dB, ndB, d, NULL);
+		}
+		h->deltas = d;
+	}
+	return RAD_OK;
+}
+
+void rad_hier_delta_lumas(const rad_hier *h, double *out)
+{
+	const rad_cluster *root = rad_cluster_at(h, 0);
+	float dB[3], ndB[3];
+	if (root->child != RAD_NONE)
+		pull_deltas(h, root, dB, ndB, NULL, out);
+}
+
+void rad_hier_drop_deltas(rad_hier *h)
+{
+	rad_mem_free(h->mem, RAD_MEM_ELEM_CLUSTER, h->deltas);
+	h->deltas = NULL;
 }
 
 /* Post-order: B and nB of every cluster, dB and ndB of the inner ones
@@ -904,14 +980,16 @@ static void pull_cluster(rad_hier *h, uint32_t id, float dB[3], float ndB[3])
 			nb[3 + c] += cndB[c];
 		}
 	}
-	rad_cluster_inner *in = &h->inner[rad_cluster_inner_index(cl)];
-	set_avg(cl->B, in->dB, acc, cl->area);
+	set_avg(cl->B, dB, acc, cl->area);
 	for (int c = 0; c < 3; c++) {
 		cl->nB[c] = (float)nb[c];
-		in->ndB[c] = (float)nb[3 + c];
+		ndB[c] = (float)nb[3 + c];
 	}
-	memcpy(dB, in->dB, sizeof(in->dB));
-	memcpy(ndB, in->ndB, sizeof(in->ndB));
+	if (h->deltas) {
+		rad_cluster_deltas *d = &h->deltas[rad_cluster_inner_index(cl)];
+		memcpy(d->dB, dB, sizeof(d->dB));
+		memcpy(d->ndB, ndB, sizeof(d->ndB));
+	}
 }
 
 /* One push: the leaf update, the optional payload and its user data. */

@@ -246,11 +246,19 @@ typedef struct rad_cluster_flux {
  * with dB and ndB.  B and nB, which every gather reads, stay in every
  * cluster: summing a leaf's in the gather too made hr 3-8 % slower. */
 typedef struct rad_cluster_inner {
-	float m[6];   /* moment model: sum of area x n n^T, xx yy zz xy xz yz */
-	float q;      /* scale of the even part */
+	float m[6]; /* moment model: sum of area x n n^T, xx yy zz xy xz yz */
+	float q;    /* scale of the even part */
+} rad_cluster_inner;
+
+/* An inner cluster's increments, pulled from its two children: kept
+ * (rad_hier.deltas, one per rad_cluster_inner) by rmb, which sends them
+ * in every step.  hr reads only their photopic values, for its
+ * statistics, and keeps those (8 bytes, not 24) only while it counts
+ * (rad_hier_delta_lumas). */
+typedef struct rad_cluster_deltas {
 	float dB[3];  /* pulled from the two children */
 	float ndB[3]; /* sum of area x luma(dB) x normal */
-} rad_cluster_inner;
+} rad_cluster_deltas;
 
 /* Index of inner cluster c's record in rad_hier.inner: its children's
  * pair (ids child, child+1; every pair starts at least 2 after the one
@@ -343,7 +351,8 @@ _Static_assert(sizeof(rad_link_ext) == 12, "rad_link_ext grew");
 _Static_assert(sizeof(rad_hlink) == 12, "rad_hlink grew");
 _Static_assert(sizeof(rad_cluster) == 76, "rad_cluster grew");
 _Static_assert(sizeof(rad_cluster_flux) == 28, "rad_cluster_flux grew");
-_Static_assert(sizeof(rad_cluster_inner) == 52, "rad_cluster_inner grew");
+_Static_assert(sizeof(rad_cluster_inner) == 28, "rad_cluster_inner grew");
+_Static_assert(sizeof(rad_cluster_deltas) == 24, "rad_cluster_deltas grew");
 
 typedef struct rad_hier {
 	const rad_scene *scene;
@@ -364,9 +373,11 @@ typedef struct rad_hier {
 	rad_pool heads;
 	uint32_t *cluster_heads;
 	uint32_t *order; /* polygon ids in cluster order, ELEM_CLUSTER */
-	rad_cluster_inner *inner; /* inner clusters' records, ELEM_CLUSTER */
-	rad_cluster_flux *flux;   /* rmb: one per cluster, ELEM_CLUSTER
-	                             (rad_hier_keep_flux); else NULL */
+	rad_cluster_inner *inner;   /* inner clusters' records, ELEM_CLUSTER */
+	rad_cluster_flux *flux;     /* rmb: one per cluster, ELEM_CLUSTER
+	                               (rad_hier_keep_flux); else NULL */
+	rad_cluster_deltas *deltas; /* one per inner record, ELEM_CLUSTER
+	                               (rad_hier_keep_deltas); else NULL */
 	uint32_t ninner;  /* entries (rad_cluster_inner_index below it) */
 	uint32_t nleaves; /* surface leaves */
 	double min_edge;  /* elements with a longer edge may split */
@@ -521,6 +532,16 @@ rad_status rad_hier_init(rad_hier *h, const rad_scene *s, rad_mem *mem,
                          rad_error *err);
 /* Give every cluster a flux record, zeroed (rmb); RAD_ERR_NOMEM. */
 rad_status rad_hier_keep_flux(rad_hier *h, rad_error *err);
+/* Keep the inner clusters' increments from now on, pulled from what the
+ * leaves hold now (as the last pull made them); RAD_ERR_NOMEM.
+ * rad_hier_drop_deltas frees them: rad_cluster_delta then pulls an inner
+ * cluster's from its subtree when asked. */
+rad_status rad_hier_keep_deltas(rad_hier *h, rad_error *err);
+void rad_hier_drop_deltas(rad_hier *h);
+/* rad_luma of every inner cluster's dB, as rad_cluster_delta gives it,
+ * into out[rad_cluster_inner_index] (h->ninner entries; hr's
+ * statistics). */
+void rad_hier_delta_lumas(const rad_hier *h, double *out);
 /* Bytes of an element's record: exact_dB as rad_hier_init's. */
 static inline size_t rad_hier_elem_size(int exact_dB)
 {
@@ -701,8 +722,9 @@ double rad_cluster_emit(const rad_cluster *c, const float B[3],
 
 /*
  * The dB and ndB of cluster c (either may be NULL): an inner cluster's
- * pulled record, or a leaf's summed from its polygons' root elements as
- * the pull sums them (the same bits while those elements hold what was
+ * pulled record, or without h->deltas its children's pulled from its
+ * subtree, or a leaf's summed from its polygons' root elements, as the
+ * pull sums them (the same bits while those elements hold what was
  * pulled).
  */
 void rad_cluster_delta(const rad_hier *h, const rad_cluster *c, float dB[3],

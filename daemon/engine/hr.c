@@ -441,6 +441,7 @@ static rad_status study_node(rad_solver *sv, void *ud, uint32_t t)
 {
 	const rad_hier *h = &sv->h;
 	int first = sv->stats.iteration == 0;
+	const double *dluma = ((const hr_state *)sv->impl)->dluma;
 	for (uint32_t id = *rad_node_links(&sv->h, t); id != RAD_NONE;
 	     id = rad_hlink_at(h, id)->next) {
 		const rad_hlink *l = rad_hlink_at(h, id);
@@ -449,7 +450,9 @@ static rad_status study_node(rad_solver *sv, void *ud, uint32_t t)
 			const rad_cluster *c = rad_cluster_at(h, l->src);
 			float d[3];
 			b = inc = rad_luma(c->B);
-			if (!first) {
+			if (!first && c->child != RAD_NONE) {
+				inc = fabs(dluma[rad_cluster_inner_index(c)]);
+			} else if (!first) {
 				rad_cluster_delta(h, c, d, NULL);
 				inc = fabs(rad_luma(d));
 			}
@@ -465,6 +468,26 @@ static rad_status study_node(rad_solver *sv, void *ud, uint32_t t)
 		}
 		node_stat_exchange(sv, ud, t, l->src, rad_hlink_ff(l), b, inc);
 	}
+	return RAD_OK;
+}
+
+/* study_node over every node.  Past the first step it reads the source
+ * clusters' increments, of which hr keeps only the inner ones' photopic
+ * values, and only while it counts (hier.h, rad_cluster_deltas).
+ * RAD_ERR_NOMEM. */
+static rad_status study_walk(rad_solver *sv)
+{
+	hr_state *st = sv->impl;
+	if (sv->stats.iteration > 0) {
+		st->dluma = rad_mem_alloc(&sv->mem, RAD_MEM_STUDY,
+		                          sv->h.ninner * sizeof(double));
+		if (!st->dluma)
+			return RAD_ERR_NOMEM;
+		rad_hier_delta_lumas(&sv->h, st->dluma);
+	}
+	tally_walk(sv, study_node);
+	rad_mem_free(&sv->mem, RAD_MEM_STUDY, st->dluma);
+	st->dluma = NULL;
 	return RAD_OK;
 }
 
@@ -606,8 +629,9 @@ static rad_status hr_step(rad_solver *sv, rad_error *err)
 	double worst = gather_bounded(sv, &g);
 	if (worst >= 0) {
 		rad_solver_progress(sv, 0.95);
-		tally_walk(sv, study_node);
-		if (rad_solver_cancelled(sv))
+		if (study_walk(sv))
+			worst = -1;
+		else if (rad_solver_cancelled(sv))
 			worst = -2; /* before the push: nothing changed yet */
 	}
 	if (worst < 0) {

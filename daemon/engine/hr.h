@@ -33,6 +33,9 @@ typedef struct hr_state {
 	 * which a memory budget leaves out: their size depends on the
 	 * threads, and the budget's judgement must not. */
 	rad_stats *tally;
+	/* While study_node counts: rad_luma of each inner cluster's dB
+	 * (rad_hier_delta_lumas), STUDY too; else NULL. */
+	double *dluma;
 } hr_state;
 
 /* Children pairs listed at a time by the waves (hr_refine.c), at most. */

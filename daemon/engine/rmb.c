@@ -308,7 +308,8 @@ static rad_status rmb_init(rad_solver *sv, rad_error *err)
 	                            sizeof(float));
 	if (rs || !st->black || !st->arefl || !st->rhomax)
 		return rad_fail(err, RAD_ERR_NOMEM, "rmb: out of memory");
-	if ((rs = rad_hier_keep_flux(&sv->h, err)))
+	if ((rs = rad_hier_keep_flux(&sv->h, err)) ||
+	    (rs = rad_hier_keep_deltas(&sv->h, err)))
 		return rs;
 	/* A budget the first step's reserve and a block of each pool do not
 	 * fit in is refused with the hierarchy's (rad_solver_new), not by

@@ -17,7 +17,7 @@
  * iteration, a digest of the scene's polygons) then the element records,
  * their sibling runs' records (one per 4 elements past the roots: runs
  * start at npolys here), the roots' exposed fractions, the cluster records, the
- * inner clusters' records (moment model, dB, ndB; one per child pair: the pairs
+ * inner clusters' records (moment model; one per child pair: the pairs
  * are clusters 1-2, 3-4, ...) and the cluster order, in the machine's byte
  * order (checkpoints are read back by the daemon that wrote them).  As for
  * scenes and solvers, the struct itself is plain calloc, not counted.  Loading
@@ -35,7 +35,7 @@
 
 #define SOL_MAGIC 0x534c5852u /* "RXLS" little-endian: "luxrad solution" */
 #define SOL_VERSION                                                            \
-	13u /* 2: clusters carry their orientation moments; 3:                 \
+	14u /* 2: clusters carry their orientation moments; 3:                 \
 	     * and where their irradiance came from; 4: elements their         \
 	     * exposed fraction (hier.h, Covered parts); 5: their path, not    \
 	     * their region (hier.h, Regions); 6: clusters no parent; 7: nor   \
@@ -47,7 +47,9 @@
 	     * elements (hier.h, Runs; written as 10, the element size         \
 	     * telling it apart); 12: an element's dB packed, 32-byte          \
 	     * records (hier.h, Increments); 13: clusters without I, V and S   \
-	     * (hier.h, rad_cluster_flux), 76-byte records */
+	     * (hier.h, rad_cluster_flux), 76-byte records; 14: inner          \
+	     * clusters' records their moment models alone (hier.h,            \
+	     * rad_cluster_deltas) */
 
 struct rad_solution {
 	const rad_scene *scene;
@@ -497,8 +499,7 @@ static rad_status check_clusters(rad_solution *s, uint32_t np, uint32_t nc,
 			                i);
 		const rad_cluster_inner *mo =
 		        &s->h.inner[rad_cluster_inner_index(c)];
-		if (!finite3(mo->m) || !finite3(mo->m + 3) ||
-		    !isfinite(mo->q) || !finite3(mo->dB) || !finite3(mo->ndB))
+		if (!finite3(mo->m) || !finite3(mo->m + 3) || !isfinite(mo->q))
 			return rad_fail(err, RAD_ERR_INVALID,
 			                "solution: cluster %u's model is "
 			                "damaged",

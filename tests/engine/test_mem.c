@@ -1112,6 +1112,69 @@ static void test_cluster_light_by_kind(void **state)
 	rad_scene_free(s);
 }
 
+/* Inner clusters' increments, three ways (deltas_check). */
+typedef struct deltas_seen {
+	const rad_cluster_deltas *kept; /* rmb's, as its pulls left them */
+	const double *luma;             /* rad_hier_delta_lumas' */
+	uint32_t inner;
+} deltas_seen;
+
+static void check_deltas(const rad_hier *h, uint32_t id, void *ud)
+{
+	deltas_seen *ds = ud;
+	const rad_cluster *c = rad_cluster_at(h, id);
+	if (c->child == RAD_NONE)
+		return;
+	uint32_t k = rad_cluster_inner_index(c);
+	float dB[3], ndB[3];
+	rad_cluster_delta(h, c, dB, ndB); /* pulled from the subtree */
+	assert_memory_equal(dB, ds->kept[k].dB, sizeof(dB));
+	assert_memory_equal(ndB, ds->kept[k].ndB, sizeof(ndB));
+	assert_true(ds->luma[k] == rad_luma(dB));
+	ds->inner++;
+}
+
+/*
+ * rmb keeps its inner clusters' dB and ndB from pull to pull; hr keeps
+ * none and pulls their photopic values when its statistics count
+ * (hier.h, rad_cluster_deltas).  Pulled again from the leaves, without
+ * the kept records, they are the same bits as the ones rmb kept, and
+ * rad_hier_delta_lumas gives their rad_luma; rmb goes on from records
+ * kept again as if nothing happened.
+ */
+static void test_cluster_deltas_pulled(void **state)
+{
+	(void)state;
+	rad_scene *s = grid_room(8);
+	rad_solver *hr = two_steps(s, RAD_SOLVER_HR);
+	assert_null(hr->h.deltas);
+	rad_solver_free(hr);
+	rad_solver *sv = two_steps(s, RAD_SOLVER_RMB);
+	rad_hier *h = &sv->h;
+	assert_non_null(h->deltas);
+	size_t bytes = h->ninner * sizeof(rad_cluster_deltas);
+	rad_cluster_deltas *kept = malloc(bytes);
+	double *luma = malloc(h->ninner * sizeof(double));
+	assert_true(kept && luma);
+	memcpy(kept, h->deltas, bytes);
+	rad_hier_drop_deltas(h);
+	assert_null(h->deltas);
+	rad_hier_delta_lumas(h, luma);
+	deltas_seen ds = {kept, luma, 0};
+	cluster_walk(h, check_deltas, &ds);
+	assert_true(ds.inner > 8);
+	rad_error err;
+	assert_int_equal(rad_hier_keep_deltas(h, &err), RAD_OK);
+	ds.inner = 0;
+	cluster_walk(h, check_deltas, &ds);
+	assert_memory_equal(h->deltas, kept, bytes);
+	assert_int_equal(rad_solver_step(sv, &err), RAD_OK);
+	free(kept);
+	free(luma);
+	rad_solver_free(sv);
+	rad_scene_free(s);
+}
+
 typedef struct leaf_count {
 	uint32_t leaves, partial, partial_end;
 } leaf_count;
@@ -1541,6 +1604,7 @@ int main(void)
 	        cmocka_unit_test(test_wave_lists),
 	        cmocka_unit_test(test_cluster_light_by_kind),
 	        cmocka_unit_test(test_hr_regathers_clusters),
+	        cmocka_unit_test(test_cluster_deltas_pulled),
 	        cmocka_unit_test(test_cluster_leaves_full),
 	        cmocka_unit_test(test_census),
 	        cmocka_unit_test(test_compact_bvh_same_results),
