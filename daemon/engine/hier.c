@@ -260,8 +260,6 @@ static void fill_cluster(rad_hier *h, uint32_t c, const double *ctr, int depth,
 		}
 	}
 	cl->area = (float)area;
-	for (int k = 0; k < 3; k++)
-		cl->n[k] = (float)n[k];
 	if (leaf)
 		return;
 	int axis = 0;
@@ -275,6 +273,8 @@ static void fill_cluster(rad_hier *h, uint32_t c, const double *ctr, int depth,
 	rad_cluster_inner *mo = &h->inner[rad_cluster_inner_index(cl)];
 	for (int k = 0; k < 6; k++)
 		mo->m[k] = (float)m[k];
+	for (int k = 0; k < 3; k++)
+		mo->n[k] = (float)n[k];
 	double rg = sphere_mean_sqrt(m);
 	mo->q = rg > 0 ? (float)(area / (2 * rg)) : 0;
 	fill_cluster(h, kids, ctr, depth - 1, w);
@@ -1246,7 +1246,7 @@ static double proj_model(const rad_hier *h, const rad_cluster *c, double dx,
 	const float *m = mo->m;
 	double q = m[0] * dx * dx + m[1] * dy * dy + m[2] * dz * dz +
 	           2 * (m[3] * dx * dy + m[4] * dx * dz + m[5] * dy * dz);
-	double odd = c->n[0] * dx + c->n[1] * dy + c->n[2] * dz;
+	double odd = mo->n[0] * dx + mo->n[1] * dy + mo->n[2] * dz;
 	return rad_pos(0.5 * (odd + mo->q * sqrt(rad_pos(q))));
 }
 
@@ -1275,15 +1275,34 @@ double rad_cluster_proj(const rad_hier *h, const rad_cluster *c, double dx,
 	return proj_at(h, c, dx, dy, dz, RAD_PROJ_DEPTH);
 }
 
-double rad_cluster_emit(const rad_cluster *c, const float B[3],
-                        const float nB[3], double p, double dx, double dy,
-                        double dz)
+void rad_cluster_normal(const rad_hier *h, const rad_cluster *c, float n[3])
+{
+	if (c->child != RAD_NONE) {
+		memcpy(n, h->inner[rad_cluster_inner_index(c)].n,
+		       3 * sizeof(*n));
+		return;
+	}
+	double s[3] = {0, 0, 0}; /* fill_cluster's sums */
+	for (uint32_t i = c->first; i < c->first + c->count; i++) {
+		const rad_poly *p = &h->scene->polys[h->order[i]];
+		for (int k = 0; k < 3; k++)
+			s[k] += (double)p->area * p->n[k];
+	}
+	for (int k = 0; k < 3; k++)
+		n[k] = (float)s[k];
+}
+
+double rad_cluster_emit(const rad_hier *h, const rad_cluster *c,
+                        const float B[3], const float nB[3], double p,
+                        double dx, double dy, double dz)
 {
 	double mean = rad_luma(B);
 	if (!(p > 1e-6 * c->area) || mean == 0)
 		return 1;
+	float n[3];
+	rad_cluster_normal(h, c, n);
 	double odd = (nB[0] * dx + nB[1] * dy + nB[2] * dz) / mean -
-	             (c->n[0] * dx + c->n[1] * dy + c->n[2] * dz);
+	             (n[0] * dx + n[1] * dy + n[2] * dz);
 	double e = p + 0.5 * odd;
 	e = e < 0 ? 0 : e > c->area ? c->area : e;
 	return e / p > 4 ? 4 : e / p;

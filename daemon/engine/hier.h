@@ -218,7 +218,6 @@ typedef struct rad_elem_run {
 typedef struct rad_cluster {
 	float lo[3], hi[3];    /* bounding box of the contents */
 	float area;            /* total area of the polygons inside */
-	float n[3];            /* sum of area x unit normal, |n| <= area */
 	uint32_t child;        /* first of 2 child clusters, RAD_NONE = leaf */
 	uint32_t first, count; /* range of order[] covered */
 	float B[3];
@@ -248,6 +247,8 @@ typedef struct rad_cluster_flux {
 typedef struct rad_cluster_inner {
 	float m[6]; /* moment model: sum of area x n n^T, xx yy zz xy xz yz */
 	float q;    /* scale of the even part */
+	float n[3]; /* sum of area x unit normal, |n| <= area (a leaf's:
+	               rad_cluster_normal) */
 } rad_cluster_inner;
 
 /* An inner cluster's increments, pulled from its two children: kept
@@ -349,9 +350,9 @@ _Static_assert(sizeof(rad_elem_run) == 16, "rad_elem_run grew");
 _Static_assert(sizeof(rad_link) == 16, "rad_link grew");
 _Static_assert(sizeof(rad_link_ext) == 12, "rad_link_ext grew");
 _Static_assert(sizeof(rad_hlink) == 12, "rad_hlink grew");
-_Static_assert(sizeof(rad_cluster) == 76, "rad_cluster grew");
+_Static_assert(sizeof(rad_cluster) == 64, "rad_cluster grew");
 _Static_assert(sizeof(rad_cluster_flux) == 28, "rad_cluster_flux grew");
-_Static_assert(sizeof(rad_cluster_inner) == 28, "rad_cluster_inner grew");
+_Static_assert(sizeof(rad_cluster_inner) == 40, "rad_cluster_inner grew");
 _Static_assert(sizeof(rad_cluster_deltas) == 24, "rad_cluster_deltas grew");
 
 typedef struct rad_hier {
@@ -716,9 +717,13 @@ double rad_cluster_proj(const rad_hier *h, const rad_cluster *c, double dx,
  * times p = P(d), its rad_cluster_proj (DESIGN, emission): of B with
  * B = c->B and nB = c->nB, of dB with its dB and ndB (rad_cluster_delta).
  */
-double rad_cluster_emit(const rad_cluster *c, const float B[3],
-                        const float nB[3], double p, double dx, double dy,
-                        double dz);
+double rad_cluster_emit(const rad_hier *h, const rad_cluster *c,
+                        const float B[3], const float nB[3], double p,
+                        double dx, double dy, double dz);
+
+/* Cluster c's sum of area x unit normal: an inner cluster's record, or
+ * a leaf's summed over its polygons as the tree's build sums it. */
+void rad_cluster_normal(const rad_hier *h, const rad_cluster *c, float n[3]);
 
 /*
  * The dB and ndB of cluster c (either may be NULL): an inner cluster's

@@ -389,8 +389,9 @@ static double cluster_emit_factor(const rad_hier *h, uint32_t rcv, uint32_t src,
 	if (!link_dir(h, src, rcv, &u))
 		return 1;
 	const rad_cluster *c = rad_cluster_at(h, src);
-	return rad_cluster_emit(c, B, nB, rad_cluster_proj(h, c, u.x, u.y, u.z),
-	                        u.x, u.y, u.z);
+	return rad_cluster_emit(h, c, B, nB,
+	                        rad_cluster_proj(h, c, u.x, u.y, u.z), u.x, u.y,
+	                        u.z);
 }
 
 double node_emit_factor(const rad_hier *h, uint32_t rcv, uint32_t src,

@@ -402,9 +402,10 @@ static void eval_cluster(gather *g, const rad_cluster *c, double b, v3 ctr,
 		return;
 	v3 u = v3_scale(v3_sub(g->x, ctr), 1 / d);
 	double p = rad_cluster_proj(g->h, c, u.x, u.y, u.z);
-	double share = b * p *
-	               rad_cluster_emit(c, c->B, c->nB, p, u.x, u.y, u.z) *
-	               cosx / (M_PI * d * d);
+	double share =
+	        b * p *
+	        rad_cluster_emit(g->h, c, c->B, c->nB, p, u.x, u.y, u.z) *
+	        cosx / (M_PI * d * d);
 	if (!(share > 0))
 		return;
 	add_error(g, share / 2);

@@ -35,7 +35,7 @@
 
 #define SOL_MAGIC 0x534c5852u /* "RXLS" little-endian: "luxrad solution" */
 #define SOL_VERSION                                                            \
-	14u /* 2: clusters carry their orientation moments; 3:                 \
+	15u /* 2: clusters carry their orientation moments; 3:                 \
 	     * and where their irradiance came from; 4: elements their         \
 	     * exposed fraction (hier.h, Covered parts); 5: their path, not    \
 	     * their region (hier.h, Regions); 6: clusters no parent; 7: nor   \
@@ -49,7 +49,8 @@
 	     * records (hier.h, Increments); 13: clusters without I, V and S   \
 	     * (hier.h, rad_cluster_flux), 76-byte records; 14: inner          \
 	     * clusters' records their moment models alone (hier.h,            \
-	     * rad_cluster_deltas) */
+	     * rad_cluster_deltas); 15: an inner cluster's normal sum in       \
+	     * its record, a leaf's summed when asked (64-byte clusters) */
 
 struct rad_solution {
 	const rad_scene *scene;
@@ -499,7 +500,8 @@ static rad_status check_clusters(rad_solution *s, uint32_t np, uint32_t nc,
 			                i);
 		const rad_cluster_inner *mo =
 		        &s->h.inner[rad_cluster_inner_index(c)];
-		if (!finite3(mo->m) || !finite3(mo->m + 3) || !isfinite(mo->q))
+		if (!finite3(mo->m) || !finite3(mo->m + 3) ||
+		    !isfinite(mo->q) || !finite3(mo->n))
 			return rad_fail(err, RAD_ERR_INVALID,
 			                "solution: cluster %u's model is "
 			                "damaged",

@@ -1225,6 +1225,33 @@ static void check_box(const rad_hier *h, uint32_t id, void *ud)
 			         id, k, c->lo[k], c->hi[k], lo[k], hi[k]);
 }
 
+/* Each cluster's sum of area x normal (an inner one's kept in its record
+ * when the tree is built, a leaf's summed when asked) against its
+ * polygons': a leaf's the same bits, an inner one's within rounding (its
+ * build summed its polygons before it split their order between its
+ * children); and no longer than its area. */
+static void check_normal(const rad_hier *h, uint32_t id, void *ud)
+{
+	const rad_cluster *c = rad_cluster_at(h, id);
+	double s[3] = {0, 0, 0};
+	float n[3];
+	(void)ud;
+	for (uint32_t j = c->first; j < c->first + c->count; j++) {
+		const rad_poly *p = &h->scene->polys[h->order[j]];
+		for (int k = 0; k < 3; k++)
+			s[k] += (double)p->area * p->n[k];
+	}
+	rad_cluster_normal(h, c, n);
+	double tol = c->child == RAD_NONE ? 0 : 1e-6 * c->area;
+	for (int k = 0; k < 3; k++)
+		if (!(fabs(n[k] - (float)s[k]) <= tol))
+			fail_msg("cluster %u, axis %d: normal sum %a, its "
+			         "polygons %a",
+			         id, k, n[k], (float)s[k]);
+	assert_true(sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]) <=
+	            c->area * (1 + 1e-6));
+}
+
 /*
  * The cluster tree's leaves are full (hier.c, split_at): over n polygons
  * there are ceil(n / RAD_CLUSTER_LEAF_MAX) of them, and the only one
@@ -1251,6 +1278,7 @@ static void test_cluster_leaves_full(void **state)
 		if (lc.partial)
 			assert_int_equal(lc.partial_end, s->npolys);
 		cluster_walk(&h, check_box, NULL);
+		cluster_walk(&h, check_normal, NULL);
 		char msg[200];
 		assert_int_equal(rad_hier_check(&h, msg, sizeof(msg)), 0);
 		rad_hier_destroy(&h);
