@@ -237,13 +237,16 @@ typedef struct rad_cluster_flux {
 
 /* What an inner cluster has beside its rad_cluster.  A leaf holds at
  * most RAD_CLUSTER_LEAF_MAX polygons: its projected area is summed over
- * them and needs no model, and its dB and ndB, which only rmb's walk and
- * hr's statistics read, are summed from their root elements when asked
- * (rad_cluster_delta), as the pull would sum them.  So these are an array
- * of their own, one per pair of child clusters: half the tree's clusters
- * are leaves, and every cluster was 160 bytes with the model and 128
- * with dB and ndB.  B and nB, which every gather reads, stay in every
- * cluster: summing a leaf's in the gather too made hr 3-8 % slower. */
+ * them and needs no model, its sum of area x normal, which only its
+ * emission reads, is summed from them when asked (rad_cluster_normal,
+ * right after the projected area read the same polygons), and its dB
+ * and ndB, which only rmb's walk and hr's statistics read, are summed
+ * from their root elements when asked (rad_cluster_delta), as the pull
+ * would sum them.  So these are an array of their own, one per pair of
+ * child clusters: half the tree's clusters are leaves, and every cluster
+ * was 160 bytes with the model and 128 with dB and ndB.  B and nB, which
+ * every gather reads, stay in every cluster: summing a leaf's in the
+ * gather too made hr 3-8 % slower. */
 typedef struct rad_cluster_inner {
 	float m[6]; /* moment model: sum of area x n n^T, xx yy zz xy xz yz */
 	float q;    /* scale of the even part */
