@@ -1174,10 +1174,8 @@ void rad_hier_push(rad_hier *h, rad_leaf_update leaf, rad_push_extra extra,
 	push_task tasks[1u << PUSH_TASK_DEPTH];
 	push_ctx p = {h, leaf, extra, own, ud, own ? tasks : NULL, 0};
 	push_cluster(&p, 0, zero, zero, 0, zero, 0);
-	if (p.ntasks) {
+	if (p.ntasks)
 		rad_par_for(par, p.ntasks, 1, push_subtrees, &p);
-		p.tasks = NULL;
-	}
 	/* A cluster gathered here reads its sources' B as the step found
 	 * them, so no leaf is updated before the last of them: the roots
 	 * took their clusters' shares into I, and their trees are pushed now,

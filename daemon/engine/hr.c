@@ -100,7 +100,7 @@ static void node_payload(const gather_job *g, uint32_t rcv,
 /* I = sum over the node's links of F x B(source), in list order, with
  * the surfaces' part times k (a cluster also records in f where it came
  * from, hier.h; f is NULL for an element); adds A x the surfaces' part
- * to took. */
+ * to took.  I NULL: took alone (clusters_took). */
 static void gather_list(gather_job *g, uint32_t rcv, uint32_t head, float I[3],
                         rad_cluster_flux *f, double took[3])
 {
@@ -136,7 +136,8 @@ static void gather_list(gather_job *g, uint32_t rcv, uint32_t head, float I[3],
 		 */
 		double black = m && !(m->rho[c] > 0) && fsum > 1 ? fsum : 1;
 		took[c] += a * g->k[c] * surf[c] / black;
-		I[c] = (float)(lit[c] + g->k[c] * surf[c]);
+		if (I)
+			I[c] = (float)(lit[c] + g->k[c] * surf[c]);
 	}
 }
 
@@ -220,28 +221,14 @@ typedef struct took_tasks {
 static void clusters_took(gather_job *g, uint32_t id, unsigned depth,
                           took_tasks *t, double took[3])
 {
-	const rad_hier *h = g->h;
-	uint32_t rcv = id | RAD_TAG_CLUSTER;
-	const rad_cluster *cl = rad_cluster_at(h, id);
+	const rad_cluster *cl = rad_cluster_at(g->h, id);
 	if (t && depth == TOOK_TASK_DEPTH && cl->child != RAD_NONE) {
 		t->id[t->n++] = id;
 		return;
 	}
-	double surf[3] = {0, 0, 0};
-	for (uint32_t l = *rad_node_links(h, rcv); l != RAD_NONE;) {
-		const rad_hlink *k = rad_hlink_at(h, l);
-		if (!node_is_light(k->src)) {
-			double b[3];
-			double fb = rad_hlink_ff(k) *
-			            node_sends(h, rcv, k->src, 0, b);
-			for (int c = 0; c < 3; c++)
-				surf[c] += fb * b[c];
-		}
-		l = k->next;
-	}
-	double a = node_area(h, rcv);
-	for (int c = 0; c < 3; c++)
-		took[c] += a * g->k[c] * surf[c];
+	gather_list(g, id | RAD_TAG_CLUSTER,
+	            *rad_node_links(g->h, id | RAD_TAG_CLUSTER), NULL, NULL,
+	            took);
 	if (cl->child != RAD_NONE) {
 		clusters_took(g, cl->child, depth + 1, t, took);
 		clusters_took(g, cl->child + 1, depth + 1, t, took);
