@@ -134,7 +134,7 @@ static int forms_parallelogram(const rad_scene *s, uint32_t t, int k,
 {
 	const rad_poly *pt = &s->polys[t], *pu = &s->polys[u];
 	if (rad_scene_merge_key(s, t) != rad_scene_merge_key(s, u) ||
-	    pt->node != pu->node || pt->side != pu->side)
+	    rad_poly_node(s, t) != rad_poly_node(s, u) || pt->side != pu->side)
 		return 0;
 	if (v3_dot(v3_f(pt->n), v3_f(pu->n)) < 1.0 - MERGE_COPLANAR)
 		return 0;
@@ -310,8 +310,12 @@ static rad_status merge_quads(rad_scene *s, rad_error *err)
 {
 	edge_map m;
 	uint8_t *pair = rad_mem_calloc(&s->mem, RAD_MEM_SCRATCH, s->npolys, 1);
-	if (!pair || edge_map_build(&m, s)) {
+	/* The kept polygons' runs (no more than there are). */
+	rad_node_run *runs = rad_mem_alloc(&s->mem, RAD_MEM_GEOMETRY,
+	                                   (size_t)s->nruns * sizeof(*runs));
+	if (!pair || (s->nruns && !runs) || edge_map_build(&m, s)) {
 		rad_mem_free(&s->mem, RAD_MEM_SCRATCH, pair);
+		rad_mem_free(&s->mem, RAD_MEM_GEOMETRY, runs);
 		return rad_fail(err, RAD_ERR_NOMEM,
 		                "commit: out of memory "
 		                "merging %u triangles",
@@ -329,13 +333,20 @@ static rad_status merge_quads(rad_scene *s, rad_error *err)
 	if (st) {
 		rad_mem_free(&s->mem, RAD_MEM_SCRATCH, m.slot);
 		rad_mem_free(&s->mem, RAD_MEM_SCRATCH, pair);
+		rad_mem_free(&s->mem, RAD_MEM_GEOMETRY, runs);
 		return st;
 	}
-	uint32_t n = 0;
+	uint32_t n = 0, nruns = 0;
 	for (uint32_t t = 0; t < s->npolys; t++)
-		if (pair[t] == PAIR_NONE || pair[t] == PAIR_QUAD)
+		if (pair[t] == PAIR_NONE || pair[t] == PAIR_QUAD) {
+			rad_node_runs_note(runs, &nruns, n,
+			                   rad_poly_node(s, t));
 			s->polys[n++] = s->polys[t];
+		}
 	s->npolys = n;
+	rad_mem_free(&s->mem, RAD_MEM_GEOMETRY, s->runs);
+	s->runs = runs;
+	s->nruns = s->cap_runs = nruns;
 	rad_mem_free(&s->mem, RAD_MEM_SCRATCH, m.slot);
 	rad_mem_free(&s->mem, RAD_MEM_SCRATCH, pair);
 	s->merged = 1;
@@ -369,8 +380,17 @@ static rad_status make_back_faces(rad_scene *s, rad_error *err)
 		                "commit: %u polygons and %u back faces are "
 		                "more than %u",
 		                nf, nb, RAD_SCENE_MAX_IDS);
-	uint32_t *twin =
-	        rad_mem_alloc(&s->mem, RAD_MEM_GEOMETRY, nf * sizeof(*twin));
+	/* The back faces' runs follow their front faces': no more again. */
+	rad_node_run *runs =
+	        rad_mem_realloc(&s->mem, RAD_MEM_GEOMETRY, s->runs,
+	                        2 * (size_t)s->nruns * sizeof(*runs));
+	if (runs) {
+		s->runs = runs;
+		s->cap_runs = 2 * s->nruns;
+	}
+	uint32_t *twin = runs ? rad_mem_alloc(&s->mem, RAD_MEM_GEOMETRY,
+	                                      nf * sizeof(*twin))
+	                      : NULL;
 	rad_poly *polys =
 	        twin ? rad_mem_realloc(&s->mem, RAD_MEM_GEOMETRY, s->polys,
 	                               (size_t)(nf + nb) * sizeof(*polys))
@@ -398,6 +418,7 @@ static rad_status make_back_faces(rad_scene *s, rad_error *err)
 		for (int c = 0; c < 3; c++)
 			b.n[c] = -b.n[c];
 		b.side = RAD_SIDE_BACK;
+		rad_node_runs_note(s->runs, &s->nruns, k, rad_poly_node(s, i));
 		polys[k] = b;
 		twin[i] = k++;
 	}
@@ -538,6 +559,7 @@ void rad_scene_free(rad_scene *s)
 	rad_mem_free(&s->mem, RAD_MEM_GEOMETRY, s->vert_slots);
 	rad_mem_free(&s->mem, RAD_MEM_GEOMETRY, s->stage_base);
 	rad_mem_free(&s->mem, RAD_MEM_GEOMETRY, s->twin);
+	rad_mem_free(&s->mem, RAD_MEM_GEOMETRY, s->runs);
 	rad_mem_free(&s->mem, RAD_MEM_MATERIALS, s->mats);
 	rad_scene_material_index_free(s);
 	for (uint32_t i = 0; i < s->nlights; i++) {

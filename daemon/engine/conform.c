@@ -384,12 +384,16 @@ rad_status rad_scene_conform(rad_scene *s, rad_error *err)
 	size_t cap = (size_t)s->npolys + nlarge;
 	rad_poly *polys =
 	        rad_mem_alloc(&s->mem, RAD_MEM_GEOMETRY, cap * sizeof(*polys));
-	uint32_t n = 0, cut = 0;
-	int ok = boxes && pcs && segs && polys;
+	/* Pieces keep their polygon's node: no more runs than there were. */
+	rad_node_run *runs = rad_mem_alloc(&s->mem, RAD_MEM_GEOMETRY,
+	                                   (size_t)s->nruns * sizeof(*runs));
+	uint32_t n = 0, cut = 0, nruns = 0;
+	int ok = boxes && pcs && segs && polys && (runs || !s->nruns);
 	for (uint32_t i = 0; ok && i < s->npolys; i++)
 		poly_box(s, &s->polys[i], tol, boxes + 6 * (size_t)i);
 	for (uint32_t i = 0; ok && i < s->npolys; i++) {
 		const rad_poly *p = &s->polys[i];
+		rad_node_runs_note(runs, &nruns, n, rad_poly_node(s, i));
 		int np = p->area >= large ? cut_polygon(s, i, boxes, large, tol,
 		                                        jtol, pcs, segs)
 		                          : 1;
@@ -430,6 +434,7 @@ rad_status rad_scene_conform(rad_scene *s, rad_error *err)
 	rad_mem_free(&s->mem, RAD_MEM_SCRATCH, pcs);
 	if (!ok) { /* the scene is as it was: commit may be retried */
 		rad_mem_free(&s->mem, RAD_MEM_GEOMETRY, polys);
+		rad_mem_free(&s->mem, RAD_MEM_GEOMETRY, runs);
 		return rad_fail(err, RAD_ERR_NOMEM,
 		                "commit: out of memory cutting %u polygons",
 		                nlarge);
@@ -437,6 +442,9 @@ rad_status rad_scene_conform(rad_scene *s, rad_error *err)
 	rad_mem_free(&s->mem, RAD_MEM_GEOMETRY, s->polys);
 	s->polys = polys;
 	s->npolys = s->cap_polys = n;
+	rad_mem_free(&s->mem, RAD_MEM_GEOMETRY, s->runs);
+	s->runs = runs;
+	s->nruns = s->cap_runs = nruns;
 	s->counts.polygons_cut += cut;
 	rad_scene_fit_polys(s);
 	return RAD_OK;

@@ -608,7 +608,7 @@ static void leaves_below(const rad_hier *h, uint32_t id, rad_leaf_fn fn,
 	}
 	double B[3] = {e->B[0], e->B[1], e->B[2]};
 	double I[3] = {e->I[0], e->I[1], e->I[2]};
-	fn(ud, h->scene->polys[rad_elem_poly(h, id)].node, pos, nv, B, I);
+	fn(ud, rad_poly_node(h->scene, rad_elem_poly(h, id)), pos, nv, B, I);
 }
 
 void rad_query_leaves(const rad_hier *h, rad_leaf_fn fn, void *ud)

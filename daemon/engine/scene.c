@@ -468,6 +468,10 @@ rad_status rad_scene_add_surface(rad_scene *s, const rad_surface_desc *d,
 			                rho[i], i / 3);
 	if ((st = reserve_polys(s, ntri, err)))
 		return st;
+	/* At most one run more: this node's, unless the last run is. */
+	if (!grow(&s->mem, RAD_MEM_GEOMETRY, (void **)&s->runs, &s->cap_runs,
+	          s->nruns + 1, sizeof(*s->runs)))
+		return rad_fail(err, RAD_ERR_NOMEM, "triangles: out of memory");
 	if (rho && (st = start_stage_base(s, err)))
 		return st;
 	for (size_t i = 0; i < ntri; i++) {
@@ -490,7 +494,6 @@ rad_status rad_scene_add_surface(rad_scene *s, const rad_surface_desc *d,
 				return st;
 		p->v[3] = p->v[2];
 		p->mat = material;
-		p->node = node;
 		p->side = d->two_sided ? RAD_SIDE_FRONT : RAD_SIDE_ONE;
 		if (rho) {
 			rad_material m = s->mats[material];
@@ -504,6 +507,7 @@ rad_status rad_scene_add_surface(rad_scene *s, const rad_surface_desc *d,
 		if (s->stage_base)
 			s->stage_base[s->npolys] =
 			        rho ? RAD_TEXTURED_BASE + material : p->mat;
+		rad_node_runs_note(s->runs, &s->nruns, s->npolys, node);
 		s->npolys++;
 	}
 	s->counts.polygons = s->npolys;
@@ -677,7 +681,7 @@ rad_status rad_scene_polygon_get(const rad_scene *s, uint32_t i,
 		out->luminance[c] = m->emit[c] / M_PI;
 	}
 	out->area = p->area;
-	out->node = p->node;
+	out->node = rad_poly_node(s, i);
 	out->back_face = p->side == RAD_SIDE_BACK;
 	return RAD_OK;
 }

@@ -82,7 +82,8 @@ static uint64_t scene_digest(const rad_scene *s)
 		memcpy(buf + o, &p->area, sizeof p->area), o += sizeof p->area;
 		uint32_t mat = p->mat; /* a bit-field: its value, as before */
 		memcpy(buf + o, &mat, sizeof mat), o += sizeof mat;
-		memcpy(buf + o, &p->node, sizeof p->node), o += sizeof p->node;
+		uint32_t node = rad_poly_node(s, i);
+		memcpy(buf + o, &node, sizeof node), o += sizeof node;
 		buf[o++] = p->quad;
 		for (size_t k = 0; k < o; k++)
 			h = (h ^ buf[k]) * 1099511628211ull;

@@ -50,7 +50,7 @@
 
 static int node_poly(const rad_scene *s, uint32_t node, uint32_t i)
 {
-	return s->polys[i].node == node && s->polys[i].area > 0;
+	return rad_poly_node(s, i) == node && s->polys[i].area > 0;
 }
 
 /* Index of the face in faces[0..n) whose normal agrees with nrm, or -1. */
@@ -346,8 +346,8 @@ uint32_t rad_scene_emitters(const rad_scene *s, rad_emitter *out, uint32_t max,
 		const rad_material *m = &s->mats[p->mat];
 		if (!rad_material_emits(m) || !(p->area > 0))
 			continue;
-		uint32_t e = 0;
-		while (e < n && out[e].node != p->node)
+		uint32_t e = 0, node = rad_poly_node(s, i);
+		while (e < n && out[e].node != node)
 			e++;
 		if (e == n && n == max) {
 			*more = 1;
@@ -355,7 +355,7 @@ uint32_t rad_scene_emitters(const rad_scene *s, rad_emitter *out, uint32_t max,
 		}
 		if (e == n) {
 			memset(&out[n], 0, sizeof(out[n]));
-			out[n++].node = p->node;
+			out[n++].node = node;
 		}
 		out[e].polygons++;
 		out[e].area_m2 += p->area;

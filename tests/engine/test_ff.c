@@ -1133,7 +1133,8 @@ static void test_scene_memory_is_exact(void **state)
 	assert_true(r.bytes[RAD_MEM_BVH] > 0);
 	assert_int_equal(r.bytes[RAD_MEM_SCRATCH], 0);
 	assert_int_equal(r.bytes[RAD_MEM_GEOMETRY],
-	                 rad_mem_usable(s->polys) + rad_mem_usable(s->verts));
+	                 rad_mem_usable(s->polys) + rad_mem_usable(s->verts) +
+	                         rad_mem_usable(s->runs));
 	assert_int_equal(r.bytes[RAD_MEM_MATERIALS], rad_mem_usable(s->mats));
 	assert_int_equal(r.bytes[RAD_MEM_LIGHTS], rad_mem_usable(s->lights));
 	assert_int_equal(r.bytes[RAD_MEM_NAMES], names_bytes(s));

@@ -190,7 +190,7 @@ static void test_quad_loads_as_one_emissive_parallelogram(void **state)
 	assert_int_equal(info.primitives_skipped, 0);
 	assert_int_equal(info.metallic_materials, 1); /* glTF default: 1 */
 	assert_float_equal(s->total_area, 1.0, 1e-6);
-	assert_string_equal(s->nodes[poly0(s)->node], "Panel");
+	assert_string_equal(s->nodes[rad_poly_node(s, 0)], "Panel");
 	const rad_material *m = &s->mats[poly0(s)->mat];
 	assert_float_equal(m->rho[0], 0.5, 1e-6);
 	assert_float_equal(m->rho[1], 0.6, 1e-6);

@@ -232,12 +232,78 @@ static void partition_does_not_leak(void **state)
 	rad_scene_free(s);
 }
 
+/*
+ * Polygons keep no node id: one record per run of polygons of a node
+ * (scene.h, rad_node_run).  Every polygon must still name the node it
+ * came from, after triangles are merged into quads, a large floor is cut
+ * where a wall stands across it, and back faces are appended; a node
+ * whose triangles all are degenerate holds none, and a node may come
+ * back after another.  Each node's polygons are at heights of its own.
+ */
+static void nodes_follow_polygons(void **state)
+{
+	(void)state;
+	rad_scene *s = NULL;
+	uint32_t node[4], none;
+	assert_int_equal(rad_scene_new(&s, NULL), RAD_OK);
+	const char *names[4] = {"floor", "wall", "panel", "shelf"};
+	for (int k = 0; k < 4; k++)
+		assert_int_equal(
+		        rad_scene_add_node(s, names[k], &node[k], NULL),
+		        RAD_OK);
+	assert_int_equal(rad_scene_add_node(s, "sliver", &none, NULL), RAD_OK);
+	uint32_t m = material(s, 0.5, 0);
+	/* floor (z = 0), cut by the wall standing across it at y = 0 */
+	quad(s, m, node[0], (double[]){-5, -5, 0}, (double[]){10, 0, 0},
+	     (double[]){0, 10, 0}, 0);
+	quad(s, m, node[1], (double[]){-5, 0, 0}, (double[]){0, 0, 3},
+	     (double[]){10, 0, 0}, 0);
+	const double flat[9] = {0, 0, 1, 1, 1, 1, 2, 2, 1}; /* no area */
+	rad_surface_desc d = {m, none, flat, NULL, 1, 0};
+	assert_int_equal(rad_scene_add_surface(s, &d, NULL), RAD_OK);
+	/* two-sided panels at z = 2, a shelf at z = 1, then a panel again */
+	quad(s, m, node[2], (double[]){-1, -1, 2}, (double[]){1, 0, 0},
+	     (double[]){0, 1, 0}, 1);
+	quad(s, m, node[3], (double[]){2, 2, 1}, (double[]){1, 0, 0},
+	     (double[]){0, 1, 0}, 1);
+	quad(s, m, node[2], (double[]){1, 1, 2}, (double[]){1, 0, 0},
+	     (double[]){0, 1, 0}, 1);
+	assert_int_equal(rad_scene_commit(s, NULL), RAD_OK);
+	rad_scene_counts c;
+	rad_scene_counts_get(s, &c);
+	assert_true(c.polygons_cut >= 1);
+	assert_int_equal(c.back_faces, 3);
+	int seen[4] = {0, 0, 0, 0};
+	for (uint32_t i = 0; i < c.polygons; i++) {
+		rad_polygon_desc p;
+		assert_int_equal(rad_scene_polygon_get(s, i, &p, NULL), RAD_OK);
+		double zmin = p.corners[0][2], zmax = zmin;
+		for (int k = 1; k < p.ncorners; k++) {
+			zmin = fmin(zmin, p.corners[k][2]);
+			zmax = fmax(zmax, p.corners[k][2]);
+		}
+		int want = zmax > zmin ? 1 : zmin == 0 ? 0 : zmin == 1 ? 3 : 2;
+		assert_int_equal(p.node, node[want]);
+		assert_string_equal(rad_scene_node_name(s, p.node),
+		                    names[want]);
+		seen[want]++;
+	}
+	/* the floor in pieces, the wall whole; each panel and the shelf a
+	 * quad with its back face */
+	assert_true(seen[0] >= 2);
+	assert_int_equal(seen[1], 1);
+	assert_int_equal(seen[2], 4);
+	assert_int_equal(seen[3], 2);
+	rad_scene_free(s);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
 	        cmocka_unit_test(emitting_sheet_shines_both_ways),
 	        cmocka_unit_test(sheet_lit_from_behind_reflects),
 	        cmocka_unit_test(partition_does_not_leak),
+	        cmocka_unit_test(nodes_follow_polygons),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
