@@ -136,7 +136,8 @@ static int forms_parallelogram(const rad_scene *s, uint32_t t, int k,
 	if (rad_scene_merge_key(s, t) != rad_scene_merge_key(s, u) ||
 	    rad_poly_node(s, t) != rad_poly_node(s, u) || pt->side != pu->side)
 		return 0;
-	if (v3_dot(v3_f(pt->n), v3_f(pu->n)) < 1.0 - MERGE_COPLANAR)
+	if (v3_dot(rad_poly_normal(pt), rad_poly_normal(pu)) <
+	    1.0 - MERGE_COPLANAR)
 		return 0;
 	v3 a = v3_f(rad_scene_vert(s, tri_vertex(s, t, k + 2)));
 	v3 b = v3_f(rad_scene_vert(s, tri_vertex(s, t, k)));
@@ -167,7 +168,7 @@ static rad_status quad_material(rad_scene *s, uint32_t t, uint32_t u,
 		return RAD_OK;
 	rad_material m = s->mats[pt->mat];
 	const rad_material *mu = &s->mats[pu->mat];
-	double at = pt->area, au = pu->area;
+	double at = rad_poly_area(pt), au = rad_poly_area(pu);
 	for (int c = 0; c < 3; c++)
 		m.rho[c] = rad_rho_float((at * m.rho[c] + au * mu->rho[c]) /
 		                         (at + au));
@@ -189,7 +190,8 @@ static void make_quad(rad_scene *s, uint32_t t, int k, uint32_t u, int j)
 	p->v[1] = b;
 	p->v[2] = d;
 	p->v[3] = c;
-	p->area = (float)v3_len(v3_cross(rad_poly_e1(s, p), rad_poly_e2(s, p)));
+	rad_poly_set_area(
+	        p, v3_len(v3_cross(rad_poly_e1(s, p), rad_poly_e2(s, p))));
 	p->quad = 1;
 }
 
@@ -415,8 +417,6 @@ static rad_status make_back_faces(rad_scene *s, rad_error *err)
 			b.v[1] = polys[i].v[2];
 			b.v[2] = b.v[3] = polys[i].v[1];
 		}
-		for (int c = 0; c < 3; c++)
-			b.n[c] = -b.n[c];
 		b.side = RAD_SIDE_BACK;
 		rad_node_runs_note(s->runs, &s->nruns, k, rad_poly_node(s, i));
 		polys[k] = b;
@@ -500,11 +500,12 @@ static void compute_totals(rad_scene *s)
 	for (uint32_t i = 0; i < s->npolys; i++) {
 		const rad_poly *p = &s->polys[i];
 		const rad_material *m = &s->mats[p->mat];
-		s->total_area += p->area;
+		double area = rad_poly_area(p);
+		s->total_area += area;
 		s->counts.quads += p->quad;
 		s->counts.emitters += rad_material_emits(m);
 		for (int c = 0; c < 3; c++)
-			s->total_flux[c] += (double)p->area * m->emit[c];
+			s->total_flux[c] += area * m->emit[c];
 	}
 	for (uint32_t i = 0; i < s->nlights; i++) {
 		const rad_light *L = &s->lights[i];

@@ -81,14 +81,14 @@ static void select_kth(const double *ctr, uint32_t *order, uint32_t lo,
 }
 
 /* Second moment of the normals (hier.h): m += a n n^T. */
-static void moments_add(double m[6], double a, const float n[3])
+static void moments_add(double m[6], double a, v3 n)
 {
-	m[0] += a * n[0] * n[0];
-	m[1] += a * n[1] * n[1];
-	m[2] += a * n[2] * n[2];
-	m[3] += a * n[0] * n[1];
-	m[4] += a * n[0] * n[2];
-	m[5] += a * n[1] * n[2];
+	m[0] += a * n.x * n.x;
+	m[1] += a * n.y * n.y;
+	m[2] += a * n.z * n.z;
+	m[3] += a * n.x * n.y;
+	m[4] += a * n.x * n.z;
+	m[5] += a * n.y * n.z;
 }
 
 /* Eigenvalues of the symmetric 3 x 3 matrix m (xx yy zz xy xz yz), by the
@@ -249,10 +249,13 @@ static void fill_cluster(rad_hier *h, uint32_t c, const double *ctr, int depth,
 		const rad_poly *p = &s->polys[h->order[i]];
 		if (leaf)
 			poly_bounds(s, p, cl->lo, cl->hi);
-		area += p->area;
-		for (int k = 0; k < 3; k++)
-			n[k] += (double)p->area * p->n[k];
-		moments_add(m, p->area, p->n);
+		v3 an = rad_poly_an(p);
+		double a = rad_poly_area(p);
+		area += a;
+		n[0] += an.x;
+		n[1] += an.y;
+		n[2] += an.z;
+		moments_add(m, a, rad_poly_normal(p));
 		const double *q = ctr + 3 * (size_t)h->order[i];
 		for (int k = 0; k < 3; k++) {
 			clo[k] = q[k] < clo[k] ? q[k] : clo[k];
@@ -406,7 +409,7 @@ int rad_elem_keep_exposed(const rad_hier *h, uint32_t id, v3 *pts, v3 *nrm,
 		return n;
 	uint32_t poly = rad_elem_poly(h, id);
 	return rad_vis_keep_uncovered(
-	        h->scene->vis, v3_f(h->scene->polys[poly].n),
+	        h->scene->vis, rad_poly_normal(&h->scene->polys[poly]),
 	        rad_hier_cover_dist(h, poly), pts, nrm, n, rays);
 }
 
@@ -830,7 +833,8 @@ static void leaf_sums(const rad_hier *h, const rad_cluster *cl, double acc[6],
 {
 	for (uint32_t j = cl->first; j < cl->first + cl->count; j++) {
 		const rad_elem *e = rad_elem_at(h, h->order[j]);
-		const float *n = h->scene->polys[h->order[j]].n;
+		v3 u = rad_poly_normal(&h->scene->polys[h->order[j]]);
+		const double n[3] = {u.x, u.y, u.z};
 		float a = rad_elem_area(h, h->order[j]), dB[3];
 		rad_elem_dB(h, e, dB);
 		double b = (double)a * rad_luma(e->B);
@@ -905,7 +909,8 @@ void rad_cluster_delta(const rad_hier *h, const rad_cluster *cl, float dB[3],
 			acc[c] += (double)a * eB[c];
 		if (!ndB)
 			continue;
-		const float *n = h->scene->polys[h->order[j]].n;
+		v3 u = rad_poly_normal(&h->scene->polys[h->order[j]]);
+		const double n[3] = {u.x, u.y, u.z};
 		double d = (double)a * rad_luma(eB);
 		for (int c = 0; c < 3; c++)
 			nb[c] += d * n[c];
@@ -1056,9 +1061,9 @@ static void push_elem(const push_ctx *p, uint32_t id, const float up[3],
 }
 
 /* Share weight w(n) per unit area of a polygon of normal n (hier.h). */
-static double shape_poly(const float n[3], const double V[3], double iso)
+static double shape_poly(v3 n, const double V[3], double iso)
 {
-	double c = n[0] * V[0] + n[1] * V[1] + n[2] * V[2];
+	double c = n.x * V[0] + n.y * V[1] + n.z * V[2];
 	return (c > 0 ? c : 0) + iso;
 }
 
@@ -1130,18 +1135,18 @@ static void push_cluster(push_ctx *p, uint32_t id, const float up[3],
 		}
 		return;
 	}
-	double sum = 0;
+	double sum = 0, shape[RAD_CLUSTER_LEAF_MAX];
 	for (uint32_t j = cl->first; j < cl->first + cl->count; j++) {
 		const rad_poly *q = &h->scene->polys[h->order[j]];
 		double ex = rad_elem_exposed(h, h->order[j]);
-		sum += ex * q->area * shape_poly(q->n, V, iso);
+		double *sh = &shape[j - cl->first];
+		*sh = shape_poly(rad_poly_normal(q), V, iso);
+		sum += ex * rad_poly_area(q) * *sh;
 	}
 	for (uint32_t j = cl->first; j < cl->first + cl->count; j++) {
-		const rad_poly *q = &h->scene->polys[h->order[j]];
 		double ex = rad_elem_exposed(h, h->order[j]);
-		double w =
-		        sum > 0 ? ex * cl->area * shape_poly(q->n, V, iso) / sum
-		                : 1;
+		double w = sum > 0 ? ex * cl->area * shape[j - cl->first] / sum
+		                   : 1;
 		share_of(w, f.I, x, si, sx);
 		if (p->own) { /* the roots' trees wait (rad_hier_push) */
 			rad_elem *e = rad_elem_at(h, h->order[j]);
@@ -1255,8 +1260,7 @@ static double proj_at(const rad_hier *h, const rad_cluster *c, double dx,
 		double p = 0;
 		for (uint32_t j = c->first; j < c->first + c->count; j++) {
 			const rad_poly *q = &h->scene->polys[h->order[j]];
-			p += q->area * rad_pos(q->n[0] * dx + q->n[1] * dy +
-			                       q->n[2] * dz);
+			p += rad_poly_shown(q, dx, dy, dz);
 		}
 		return p;
 	}
@@ -1283,8 +1287,10 @@ void rad_cluster_normal(const rad_hier *h, const rad_cluster *c, float n[3])
 	double s[3] = {0, 0, 0}; /* fill_cluster's sums */
 	for (uint32_t i = c->first; i < c->first + c->count; i++) {
 		const rad_poly *p = &h->scene->polys[h->order[i]];
-		for (int k = 0; k < 3; k++)
-			s[k] += (double)p->area * p->n[k];
+		v3 an = rad_poly_an(p);
+		s[0] += an.x;
+		s[1] += an.y;
+		s[2] += an.z;
 	}
 	for (int k = 0; k < 3; k++)
 		n[k] = (float)s[k];

@@ -535,7 +535,7 @@ static double rcv_rows(const rad_hier *h, uint32_t rcv, const v3 *xs,
 		return rad_ff_rcv_mean(NULL, v3_make(0, 0, 0), NULL, rows, n, 0,
 		                       NULL, NULL);
 	double ex, cover = rcv_cover(h, rcv, &ex);
-	v3 nr = v3_f(h->scene->polys[rad_elem_poly(h, rcv)].n);
+	v3 nr = rad_poly_normal(&h->scene->polys[rad_elem_poly(h, rcv)]);
 	double f = rad_ff_rcv_mean(h->scene->vis, nr, xs, rows, n, cover, rays,
 	                           spread);
 	*spread *= ex;

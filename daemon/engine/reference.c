@@ -157,7 +157,7 @@ static rad_status emitters_build(emitters *em, const rad_scene *s, rad_mem *mem,
 	uint32_t k = 0;
 	for (uint32_t i = 0; i < s->npolys; i++) {
 		const rad_poly *p = &s->polys[i];
-		double w = luma_f(s->mats[p->mat].emit) * p->area;
+		double w = luma_f(s->mats[p->mat].emit) * rad_poly_area(p);
 		if (!(w > 0))
 			continue;
 		sum += w;
@@ -350,7 +350,7 @@ static void nee_emitter(const tracer *tr, const vertex *v, const double *beta,
 	const rad_poly *p =
 	        &tr->s->polys[em->poly[emitters_pick(em, rng_next(r))]];
 	double u1 = rng_next(r), u2 = rng_next(r);
-	v3 y = poly_sample(tr->s, p, u1, u2), ny = v3_f(p->n);
+	v3 y = poly_sample(tr->s, p, u1, u2), ny = rad_poly_normal(p);
 	v3 d = v3_sub(y, v->x);
 	double r2 = v3_dot(d, d);
 	if (!(r2 > 0))
@@ -422,7 +422,7 @@ static int bounce(const tracer *tr, vertex *v, double beta[3], rng *r,
 		return 0;
 	const rad_poly *p = &tr->s->polys[hit];
 	const rad_material *m = &tr->s->mats[p->mat];
-	v3 ny = v3_f(p->n);
+	v3 ny = rad_poly_normal(p);
 	if (tr->em.n && luma_f(m->emit) > 0) {
 		double cy = -v3_dot(dir, ny);
 		double w = 1.0;

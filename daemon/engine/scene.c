@@ -386,9 +386,8 @@ static enum rad_poly_verdict make_triangle(rad_scene *s, const double *xyz,
 	enum rad_poly_verdict verdict = rad_poly_check_edges(e1f, e2f, area, n);
 	if (verdict != RAD_POLY_OK)
 		return verdict;
-	v3_store_f(p->n, n);
-	p->area = (float)area;
 	p->quad = 0;
+	rad_poly_set_shape(p, n, area);
 	return RAD_POLY_OK;
 }
 
@@ -675,12 +674,15 @@ rad_status rad_scene_polygon_get(const rad_scene *s, uint32_t i,
 		out->corners[k][1] = v[k].y;
 		out->corners[k][2] = v[k].z;
 	}
+	v3 n = rad_poly_normal(p);
+	out->normal[0] = n.x;
+	out->normal[1] = n.y;
+	out->normal[2] = n.z;
 	for (int c = 0; c < 3; c++) {
-		out->normal[c] = p->n[c];
 		out->reflectance[c] = m->rho[c];
 		out->luminance[c] = m->emit[c] / M_PI;
 	}
-	out->area = p->area;
+	out->area = rad_poly_area(p);
 	out->node = rad_poly_node(s, i);
 	out->back_face = p->side == RAD_SIDE_BACK;
 	return RAD_OK;

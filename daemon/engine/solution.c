@@ -35,7 +35,7 @@
 
 #define SOL_MAGIC 0x534c5852u /* "RXLS" little-endian: "luxrad solution" */
 #define SOL_VERSION                                                            \
-	15u /* 2: clusters carry their orientation moments; 3:                 \
+	16u /* 2: clusters carry their orientation moments; 3:                 \
 	     * and where their irradiance came from; 4: elements their         \
 	     * exposed fraction (hier.h, Covered parts); 5: their path, not    \
 	     * their region (hier.h, Regions); 6: clusters no parent; 7: nor   \
@@ -50,7 +50,9 @@
 	     * (hier.h, rad_cluster_flux), 76-byte records; 14: inner          \
 	     * clusters' records their moment models alone (hier.h,            \
 	     * rad_cluster_deltas); 15: an inner cluster's normal sum in       \
-	     * its record, a leaf's summed when asked (64-byte clusters) */
+	     * its record, a leaf's summed when asked (64-byte clusters);      \
+	     * 16: polygons' normals octahedral in 32 bits (scene.h, Normal    \
+	     * and area) */
 
 struct rad_solution {
 	const rad_scene *scene;
@@ -73,12 +75,12 @@ static uint64_t scene_digest(const rad_scene *s)
 	for (uint32_t i = 0; i < s->npolys; i++) {
 		const rad_poly *p = &s->polys[i];
 		unsigned char
-		        buf[13 * sizeof(float) + 2 * sizeof(uint32_t) + 1];
+		        buf[10 * sizeof(float) + 3 * sizeof(uint32_t) + 1];
 		size_t o = 0;
 		float f[9]; /* the polygon as the solvers see it */
 		rad_poly_frame(s, p, f, f + 3, f + 6);
 		memcpy(buf + o, f, sizeof f), o += sizeof f;
-		memcpy(buf + o, p->n, sizeof p->n), o += sizeof p->n;
+		memcpy(buf + o, p->oct, sizeof p->oct), o += sizeof p->oct;
 		memcpy(buf + o, &p->area, sizeof p->area), o += sizeof p->area;
 		uint32_t mat = p->mat; /* a bit-field: its value, as before */
 		memcpy(buf + o, &mat, sizeof mat), o += sizeof mat;

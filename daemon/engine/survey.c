@@ -50,7 +50,7 @@
 
 static int node_poly(const rad_scene *s, uint32_t node, uint32_t i)
 {
-	return rad_poly_node(s, i) == node && s->polys[i].area > 0;
+	return rad_poly_node(s, i) == node && rad_poly_area(&s->polys[i]) > 0;
 }
 
 /* Index of the face in faces[0..n) whose normal agrees with nrm, or -1. */
@@ -104,7 +104,8 @@ static void face_rect(const rad_scene *s, uint32_t node, rad_face *f)
 	face_frame(n, &u, &v);
 	for (uint32_t i = 0; i < s->npolys; i++) {
 		const rad_poly *p = &s->polys[i];
-		if (!node_poly(s, node, i) || v3_dot(v3_f(p->n), n) < FACE_COS)
+		if (!node_poly(s, node, i) ||
+		    v3_dot(rad_poly_normal(p), n) < FACE_COS)
 			continue;
 		if (!have_ref) {
 			ref = rad_scene_vertex(s, p->v[0]);
@@ -142,18 +143,21 @@ rad_status rad_scene_node_faces(const rad_scene *s, uint32_t node,
 		if (!node_poly(s, node, i))
 			continue;
 		const rad_poly *p = &s->polys[i];
-		int f = face_of(faces, n, v3_f(p->n));
+		v3 pn = rad_poly_normal(p);
+		double area = rad_poly_area(p);
+		int f = face_of(faces, n, pn);
 		if (f < 0 && n == max) {
-			*skipped_m2 += p->area;
+			*skipped_m2 += area;
 			continue;
 		}
 		if (f < 0) {
 			f = n++;
 			memset(&faces[f], 0, sizeof(faces[f]));
-			for (int k = 0; k < 3; k++)
-				faces[f].normal[k] = p->n[k];
+			faces[f].normal[0] = pn.x;
+			faces[f].normal[1] = pn.y;
+			faces[f].normal[2] = pn.z;
 		}
-		faces[f].area_m2 += p->area;
+		faces[f].area_m2 += area;
 		faces[f].polygons++;
 	}
 	/* Largest first (insertion sort: a handful of faces). */
@@ -196,6 +200,7 @@ static size_t sample_poly(const rad_scene *sc, const rad_poly *p,
 	double cu = lu > 0 ? lu / nu : 1, cv = lv > 0 ? lv / nv : 1;
 	v3 p0 = rad_scene_vertex(sc, p->v[0]);
 	v3 pe1 = rad_poly_e1(sc, p), pe2 = rad_poly_e2(sc, p);
+	v3 pn = rad_poly_normal(p);
 	double box[4] = {HUGE_VAL, -HUGE_VAL, HUGE_VAL, -HUGE_VAL};
 	grow_box(sc, p, o, u, v, box);
 	double e1[2] = {v3_dot(pe1, u), v3_dot(pe1, v)};
@@ -227,8 +232,9 @@ static size_t sample_poly(const rad_scene *sc, const rad_poly *p,
 			out[0] = x.x;
 			out[1] = x.y;
 			out[2] = x.z;
-			for (int m = 0; m < 3; m++)
-				out[3 + m] = p->n[m];
+			out[3] = pn.x;
+			out[4] = pn.y;
+			out[5] = pn.z;
 			on[k] = 1;
 			added++;
 		}
@@ -254,7 +260,7 @@ rad_status rad_scene_face_sample(const rad_scene *s, uint32_t node,
 	for (uint32_t i = 0; i < s->npolys; i++) {
 		const rad_poly *p = &s->polys[i];
 		if (node_poly(s, node, i) &&
-		    v3_dot(v3_f(p->n), nrm) >= FACE_COS)
+		    v3_dot(rad_poly_normal(p), nrm) >= FACE_COS)
 			*non += sample_poly(s, p, f, nu, nv, pts, on);
 	}
 	return RAD_OK;
@@ -344,7 +350,8 @@ uint32_t rad_scene_emitters(const rad_scene *s, rad_emitter *out, uint32_t max,
 	for (uint32_t i = 0; i < s->npolys; i++) {
 		const rad_poly *p = &s->polys[i];
 		const rad_material *m = &s->mats[p->mat];
-		if (!rad_material_emits(m) || !(p->area > 0))
+		double area = rad_poly_area(p);
+		if (!rad_material_emits(m) || !(area > 0))
 			continue;
 		uint32_t e = 0, node = rad_poly_node(s, i);
 		while (e < n && out[e].node != node)
@@ -358,9 +365,9 @@ uint32_t rad_scene_emitters(const rad_scene *s, rad_emitter *out, uint32_t max,
 			out[n++].node = node;
 		}
 		out[e].polygons++;
-		out[e].area_m2 += p->area;
+		out[e].area_m2 += area;
 		for (int k = 0; k < 3; k++)
-			out[e].exitance[k] += (double)m->emit[k] * p->area;
+			out[e].exitance[k] += (double)m->emit[k] * area;
 	}
 	for (uint32_t e = 0; e < n; e++) {
 		double *x = out[e].exitance;

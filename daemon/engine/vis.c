@@ -548,7 +548,7 @@ typedef struct front_ctx {
 /* 1 if dir meets polygon i from its front. */
 static int poly_front(const rad_vis *v, uint32_t i, v3 dir)
 {
-	return v3_dot(v3_f(v->polys[i].n), dir) < 0;
+	return v3_dot(rad_poly_dir(&v->polys[i]), dir) < 0;
 }
 
 /*

@@ -199,7 +199,7 @@ static void test_quad_loads_as_one_emissive_parallelogram(void **state)
 	assert_float_equal(m->emit[0], M_PI * 4.0, 1e-4);
 	assert_float_equal(m->emit[1], M_PI * 2.0, 1e-4);
 	assert_float_equal(m->emit[2], M_PI * 1.0, 1e-4);
-	assert_float_equal(poly0(s)->n[2], 1.0, 1e-6);
+	assert_float_equal(rad_poly_normal(poly0(s)).z, 1.0, 1e-6);
 	rad_scene_free(s);
 	free(doc);
 }
@@ -239,7 +239,8 @@ static void test_non_indexed_strip_and_fan_cover_the_square(void **state)
 		assert_int_equal(s->counts.triangles_in, 2);
 		assert_float_equal(s->total_area, 1.0, 1e-6);
 		for (uint32_t i = 0; i < s->npolys; i++) /* all face +Z */
-			assert_float_equal(s->polys[i].n[2], 1.0, 1e-6);
+			assert_float_equal(rad_poly_normal(&s->polys[i]).z, 1.0,
+			                   1e-6);
 		rad_scene_free(s);
 		free(doc);
 	}
@@ -295,7 +296,7 @@ static void test_mirroring_keeps_the_front_side(void **state)
 	char *doc = subst(quad_doc(), "\"mesh\":0}",
 	                  "\"mesh\":0,\"scale\":[-1,1,1]}");
 	rad_scene *s = load_ok(doc, strlen(doc), NULL);
-	assert_float_equal(poly0(s)->n[2], 1.0, 1e-6);
+	assert_float_equal(rad_poly_normal(poly0(s)).z, 1.0, 1e-6);
 	double lo[3], hi[3];
 	rad_scene_bounds(s, lo, hi);
 	assert_float_equal(lo[0], -1.0, 1e-6);

@@ -1004,7 +1004,8 @@ static void cluster_sums(const rad_hier *h, const rad_cluster *c, double B[3],
 		B[k] = dB[k] = nB[k] = ndB[k] = 0;
 	for (uint32_t j = c->first; j < c->first + c->count; j++) {
 		const rad_elem *e = rad_elem_at(h, h->order[j]);
-		const float *n = h->scene->polys[h->order[j]].n;
+		v3 u = rad_poly_normal(&h->scene->polys[h->order[j]]);
+		const double n[3] = {u.x, u.y, u.z};
 		double a = rad_elem_area(h, h->order[j]);
 		float ed[3];
 		rad_elem_dB(h, e, ed);
@@ -1227,9 +1228,11 @@ static void check_box(const rad_hier *h, uint32_t id, void *ud)
 
 /* Each cluster's sum of area x normal (an inner one's kept in its record
  * when the tree is built, a leaf's summed when asked) against its
- * polygons': a leaf's the same bits, an inner one's within rounding (its
- * build summed its polygons before it split their order between its
- * children); and no longer than its area. */
+ * polygons' areas times their unit normals, within rounding (the
+ * cluster's sums ka times the decoded direction, scene.h, Normal and
+ * area, in another order for an inner one, whose build summed its
+ * polygons before it split their order between its children); and no
+ * longer than its area. */
 static void check_normal(const rad_hier *h, uint32_t id, void *ud)
 {
 	const rad_cluster *c = rad_cluster_at(h, id);
@@ -1238,11 +1241,14 @@ static void check_normal(const rad_hier *h, uint32_t id, void *ud)
 	(void)ud;
 	for (uint32_t j = c->first; j < c->first + c->count; j++) {
 		const rad_poly *p = &h->scene->polys[h->order[j]];
-		for (int k = 0; k < 3; k++)
-			s[k] += (double)p->area * p->n[k];
+		double a = rad_poly_area(p);
+		v3 u = rad_poly_normal(p);
+		s[0] += a * u.x;
+		s[1] += a * u.y;
+		s[2] += a * u.z;
 	}
 	rad_cluster_normal(h, c, n);
-	double tol = c->child == RAD_NONE ? 0 : 1e-6 * c->area;
+	double tol = 1e-6 * c->area;
 	for (int k = 0; k < 3; k++)
 		if (!(fabs(n[k] - (float)s[k]) <= tol))
 			fail_msg("cluster %u, axis %d: normal sum %a, its "

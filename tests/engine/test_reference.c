@@ -514,7 +514,7 @@ static void test_coincident_pair_shows_front(void **state)
 			assert_int_not_equal(hit, UINT32_MAX);
 			assert_int_equal(front, 1);
 			assert_true(fabs(t - 1) < 1e-5);
-			assert_true(v3_dot(v3_f(s->polys[hit].n),
+			assert_true(v3_dot(rad_poly_normal(&s->polys[hit]),
 			                   k ? up : down) < 0);
 		}
 		rad_scene_free(s);
