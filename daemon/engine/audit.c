@@ -73,8 +73,7 @@ static void cluster_cum(const rad_hier *h, const rad_cluster *c, double *cum)
 	cum[0] = 0;
 	for (uint32_t i = 0; i < c->count; i++)
 		cum[i + 1] =
-		        cum[i] +
-		        rad_poly_area(&h->scene->polys[h->order[c->first + i]]);
+		        cum[i] + h->scene->polys[h->order[c->first + i]].area;
 }
 
 /* A sample point of node t with its normal and the photopic radiosity

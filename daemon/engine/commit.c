@@ -168,7 +168,7 @@ static rad_status quad_material(rad_scene *s, uint32_t t, uint32_t u,
 		return RAD_OK;
 	rad_material m = s->mats[pt->mat];
 	const rad_material *mu = &s->mats[pu->mat];
-	double at = rad_poly_area(pt), au = rad_poly_area(pu);
+	double at = pt->area, au = pu->area;
 	for (int c = 0; c < 3; c++)
 		m.rho[c] = rad_rho_float((at * m.rho[c] + au * mu->rho[c]) /
 		                         (at + au));
@@ -190,8 +190,7 @@ static void make_quad(rad_scene *s, uint32_t t, int k, uint32_t u, int j)
 	p->v[1] = b;
 	p->v[2] = d;
 	p->v[3] = c;
-	rad_poly_set_area(
-	        p, v3_len(v3_cross(rad_poly_e1(s, p), rad_poly_e2(s, p))));
+	p->area = (float)v3_len(v3_cross(rad_poly_e1(s, p), rad_poly_e2(s, p)));
 	p->quad = 1;
 }
 
@@ -500,12 +499,11 @@ static void compute_totals(rad_scene *s)
 	for (uint32_t i = 0; i < s->npolys; i++) {
 		const rad_poly *p = &s->polys[i];
 		const rad_material *m = &s->mats[p->mat];
-		double area = rad_poly_area(p);
-		s->total_area += area;
+		s->total_area += p->area;
 		s->counts.quads += p->quad;
 		s->counts.emitters += rad_material_emits(m);
 		for (int c = 0; c < 3; c++)
-			s->total_flux[c] += area * m->emit[c];
+			s->total_flux[c] += (double)p->area * m->emit[c];
 	}
 	for (uint32_t i = 0; i < s->nlights; i++) {
 		const rad_light *L = &s->lights[i];

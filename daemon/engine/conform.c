@@ -251,19 +251,17 @@ static int cut_polygon(const rad_scene *s, uint32_t i, const float *boxes,
 {
 	const rad_poly *p = &s->polys[i];
 	v3 n = rad_poly_normal(p), o = rad_scene_vertex(s, p->v[0]);
-	double area = rad_poly_area(p);
-	double min_area = MIN_PIECE * area;
-	double wall = fmax(large, ANCHOR_SHARE * area);
+	double min_area = MIN_PIECE * p->area;
+	double wall = fmax(large, ANCHOR_SHARE * p->area);
 	int ns = 0;
 	/* Walls first: when more than MAX_SEGS surfaces meet i, the
 	 * furniture is what is left out. */
 	for (int pass = 0; pass < 2; pass++)
 		for (uint32_t j = 0; j < s->npolys && ns < MAX_SEGS; j++) {
-			if (j == i || !boxes_meet(boxes + 6 * (size_t)i,
-			                          boxes + 6 * (size_t)j))
-				continue;
-			int is_wall = rad_poly_area(&s->polys[j]) >= wall;
-			if (is_wall != (pass == 0))
+			int is_wall = s->polys[j].area >= wall;
+			if (j == i || is_wall != (pass == 0) ||
+			    !boxes_meet(boxes + 6 * (size_t)i,
+			                boxes + 6 * (size_t)j))
 				continue;
 			if (plane_segment(s, &s->polys[j], o, n, tol,
 			                  &segs[ns].a, &segs[ns].b))
@@ -331,7 +329,7 @@ static int set_corners(rad_scene *s, rad_poly *q, const v3 *c, int quad, v3 n)
 			return -1;
 	if (!quad)
 		q->v[3] = q->v[2];
-	rad_poly_set_area(q, area);
+	q->area = (float)area;
 	q->quad = (uint8_t)quad;
 	return 1;
 }
@@ -368,12 +366,12 @@ rad_status rad_scene_conform(rad_scene *s, rad_error *err)
 {
 	double total = 0;
 	for (uint32_t i = 0; i < s->npolys; i++)
-		total += rad_poly_area(&s->polys[i]);
+		total += s->polys[i].area;
 	double large = LARGE_SHARE * total, tol = TOL_REL * s->diag;
 	double jtol = JOIN_REL * s->diag;
 	uint32_t nlarge = 0;
 	for (uint32_t i = 0; i < s->npolys; i++)
-		nlarge += rad_poly_area(&s->polys[i]) >= large;
+		nlarge += s->polys[i].area >= large;
 	if (nlarge == 0)
 		return RAD_OK;
 	float *boxes = rad_mem_alloc(&s->mem, RAD_MEM_SCRATCH,
@@ -396,10 +394,9 @@ rad_status rad_scene_conform(rad_scene *s, rad_error *err)
 	for (uint32_t i = 0; ok && i < s->npolys; i++) {
 		const rad_poly *p = &s->polys[i];
 		rad_node_runs_note(runs, &nruns, n, rad_poly_node(s, i));
-		int np = rad_poly_area(p) >= large
-		                 ? cut_polygon(s, i, boxes, large, tol, jtol,
-		                               pcs, segs)
-		                 : 1;
+		int np = p->area >= large ? cut_polygon(s, i, boxes, large, tol,
+		                                        jtol, pcs, segs)
+		                          : 1;
 		if (np == 1) {
 			polys[n++] = *p;
 			continue;

@@ -250,7 +250,7 @@ static void fill_cluster(rad_hier *h, uint32_t c, const double *ctr, int depth,
 		if (leaf)
 			poly_bounds(s, p, cl->lo, cl->hi);
 		v3 an = rad_poly_an(p);
-		double a = rad_poly_area(p);
+		double a = p->area;
 		area += a;
 		n[0] += an.x;
 		n[1] += an.y;
@@ -1141,7 +1141,7 @@ static void push_cluster(push_ctx *p, uint32_t id, const float up[3],
 		double ex = rad_elem_exposed(h, h->order[j]);
 		double *sh = &shape[j - cl->first];
 		*sh = shape_poly(rad_poly_normal(q), V, iso);
-		sum += ex * rad_poly_area(q) * *sh;
+		sum += ex * q->area * *sh;
 	}
 	for (uint32_t j = cl->first; j < cl->first + cl->count; j++) {
 		double ex = rad_elem_exposed(h, h->order[j]);

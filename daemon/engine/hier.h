@@ -582,12 +582,12 @@ void rad_region_quarter(float p0[3], float e1[3], float e2[3], int quad, int k);
 static inline float rad_elem_area(const rad_hier *h, uint32_t id)
 {
 	if (id < h->run0)
-		return (float)rad_poly_area(&h->scene->polys[id]);
+		return h->scene->polys[id].area;
 	const rad_elem_run *r = rad_elem_run_of(h, id);
 	uint32_t bits = (uint32_t)(127 - 2 * (int)r->level) << 23;
 	float quarter;
 	memcpy(&quarter, &bits, sizeof quarter);
-	return (float)rad_poly_area(&h->scene->polys[r->poly]) * quarter;
+	return h->scene->polys[r->poly].area * quarter;
 }
 /* 1 if element id's polygon is a parallelogram, 0 for a triangle. */
 static inline int rad_elem_quad(const rad_hier *h, uint32_t id)

@@ -157,7 +157,7 @@ static rad_status emitters_build(emitters *em, const rad_scene *s, rad_mem *mem,
 	uint32_t k = 0;
 	for (uint32_t i = 0; i < s->npolys; i++) {
 		const rad_poly *p = &s->polys[i];
-		double w = luma_f(s->mats[p->mat].emit) * rad_poly_area(p);
+		double w = luma_f(s->mats[p->mat].emit) * p->area;
 		if (!(w > 0))
 			continue;
 		sum += w;

@@ -682,7 +682,7 @@ rad_status rad_scene_polygon_get(const rad_scene *s, uint32_t i,
 		out->reflectance[c] = m->rho[c];
 		out->luminance[c] = m->emit[c] / M_PI;
 	}
-	out->area = rad_poly_area(p);
+	out->area = p->area;
 	out->node = rad_poly_node(s, i);
 	out->back_face = p->side == RAD_SIDE_BACK;
 	return RAD_OK;

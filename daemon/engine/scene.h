@@ -401,22 +401,10 @@ static inline v3 rad_poly_an(const rad_poly *p)
 	return v3_scale(d, p->area / v3_len(d));
 }
 
-/* m2 */
-static inline double rad_poly_area(const rad_poly *p)
-{
-	return p->area;
-}
-
 /* Unit normal, front side. */
 static inline v3 rad_poly_normal(const rad_poly *p)
 {
 	return v3_norm(rad_poly_dir(p));
-}
-
-/* Set the polygon's area (m2), its normal code kept. */
-static inline void rad_poly_set_area(rad_poly *p, double area)
-{
-	p->area = (float)area;
 }
 
 /* Set the polygon's unit normal n (front side) and area (m2). */
@@ -431,7 +419,7 @@ static inline void rad_poly_set_shape(rad_poly *p, v3 n, double area)
 	}
 	p->oct[0] = (int16_t)lround(x * RAD_OCT_ONE);
 	p->oct[1] = (int16_t)lround(y * RAD_OCT_ONE);
-	rad_poly_set_area(p, area);
+	p->area = (float)area;
 }
 
 /* Shrink the polygon array to its count (the memory merging or cutting

@@ -50,7 +50,7 @@
 
 static int node_poly(const rad_scene *s, uint32_t node, uint32_t i)
 {
-	return rad_poly_node(s, i) == node && rad_poly_area(&s->polys[i]) > 0;
+	return rad_poly_node(s, i) == node && s->polys[i].area > 0;
 }
 
 /* Index of the face in faces[0..n) whose normal agrees with nrm, or -1. */
@@ -144,10 +144,9 @@ rad_status rad_scene_node_faces(const rad_scene *s, uint32_t node,
 			continue;
 		const rad_poly *p = &s->polys[i];
 		v3 pn = rad_poly_normal(p);
-		double area = rad_poly_area(p);
 		int f = face_of(faces, n, pn);
 		if (f < 0 && n == max) {
-			*skipped_m2 += area;
+			*skipped_m2 += p->area;
 			continue;
 		}
 		if (f < 0) {
@@ -157,7 +156,7 @@ rad_status rad_scene_node_faces(const rad_scene *s, uint32_t node,
 			faces[f].normal[1] = pn.y;
 			faces[f].normal[2] = pn.z;
 		}
-		faces[f].area_m2 += area;
+		faces[f].area_m2 += p->area;
 		faces[f].polygons++;
 	}
 	/* Largest first (insertion sort: a handful of faces). */
@@ -350,8 +349,7 @@ uint32_t rad_scene_emitters(const rad_scene *s, rad_emitter *out, uint32_t max,
 	for (uint32_t i = 0; i < s->npolys; i++) {
 		const rad_poly *p = &s->polys[i];
 		const rad_material *m = &s->mats[p->mat];
-		double area = rad_poly_area(p);
-		if (!rad_material_emits(m) || !(area > 0))
+		if (!rad_material_emits(m) || !(p->area > 0))
 			continue;
 		uint32_t e = 0, node = rad_poly_node(s, i);
 		while (e < n && out[e].node != node)
@@ -365,9 +363,9 @@ uint32_t rad_scene_emitters(const rad_scene *s, rad_emitter *out, uint32_t max,
 			out[n++].node = node;
 		}
 		out[e].polygons++;
-		out[e].area_m2 += area;
+		out[e].area_m2 += p->area;
 		for (int k = 0; k < 3; k++)
-			out[e].exitance[k] += (double)m->emit[k] * area;
+			out[e].exitance[k] += (double)m->emit[k] * p->area;
 	}
 	for (uint32_t e = 0; e < n; e++) {
 		double *x = out[e].exitance;

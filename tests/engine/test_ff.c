@@ -917,7 +917,7 @@ static double commit_area(rad_scene *s, rad_scene_counts *c)
 	rad_scene_counts_get(s, c);
 	double a = 0;
 	for (uint32_t i = 0; i < s->npolys; i++)
-		a += rad_poly_area(&s->polys[i]);
+		a += s->polys[i].area;
 	return a;
 }
 
@@ -985,7 +985,7 @@ static void test_scene_merges_square_into_one_parallelogram(void **state)
 	assert_int_equal(c.quads, 1);
 	const rad_poly *p = &s->polys[0];
 	assert_int_equal(p->quad, 1);
-	assert_rel(rad_poly_area(p), 1, 1e-7);
+	assert_rel(p->area, 1, 1e-7);
 	assert_rel(rad_poly_normal(p).x, 1, 1e-7);
 	v3 e = v3_cross(rad_poly_e1(s, p), rad_poly_e2(s, p));
 	assert_true(e.x > 0); /* same orientation as the triangles */
@@ -1023,8 +1023,7 @@ static void test_scene_merges_triangulated_grid_into_cells(void **state)
 	assert_int_equal(s->counts.polygons, 16);
 	assert_int_equal(s->counts.quads, 16);
 	for (uint32_t i = 0; i < s->npolys; i++)
-		assert_rel(rad_poly_area(&s->polys[i]), 1,
-		           1e-6); /* unit cells */
+		assert_rel(s->polys[i].area, 1, 1e-6); /* unit cells */
 	rad_scene_free(s);
 }
 
@@ -1286,7 +1285,7 @@ static void test_scene_far_from_origin_keeps_exact_edges(void **state)
 	v3 p0 = rad_scene_vertex(s, p->v[0]);
 	assert_abs(p0.x, X + 3.1, 1e-6);
 	assert_abs(p0.y, Y + 4.7, 1e-6);
-	assert_rel(rad_poly_area(p), 0.5e-4, 1e-6);
+	assert_rel(p->area, 0.5e-4, 1e-6);
 	/* The BVH, traced relative to the same origin, finds it. */
 	rad_vis_thread_init();
 	double t;

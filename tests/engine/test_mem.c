@@ -1241,7 +1241,7 @@ static void check_normal(const rad_hier *h, uint32_t id, void *ud)
 	(void)ud;
 	for (uint32_t j = c->first; j < c->first + c->count; j++) {
 		const rad_poly *p = &h->scene->polys[h->order[j]];
-		double a = rad_poly_area(p);
+		double a = p->area;
 		v3 u = rad_poly_normal(p);
 		s[0] += a * u.x;
 		s[1] += a * u.y;
