@@ -43,7 +43,7 @@ static void leaf_patch(const rad_hier *h, uint32_t id, uint64_t *s,
                        rad_patch *p, uint32_t *leaf)
 {
 	const rad_elem *e = rad_elem_at(h, id);
-	while (e->child != RAD_NONE) {
+	while (!rad_elem_is_leaf(e)) {
 		uint32_t k = (uint32_t)(rad_uniform(s) * 4);
 		id = e->child + (k > 3 ? 3 : k);
 		e = rad_elem_at(h, id);

@@ -237,7 +237,7 @@ static void fill_cluster(rad_hier *h, uint32_t c, const double *ctr, int depth,
 		return;
 	}
 	rad_cluster *cl = rad_cluster_at(h, c);
-	int leaf = cl->child == RAD_NONE;
+	int leaf = rad_cluster_is_leaf(cl);
 	for (int k = 0; leaf && k < 3; k++) {
 		cl->lo[k] = FLT_MAX;
 		cl->hi[k] = -FLT_MAX;
@@ -291,7 +291,7 @@ static void fill_cluster(rad_hier *h, uint32_t c, const double *ctr, int depth,
 static void bound_inner(rad_hier *h, uint32_t c)
 {
 	rad_cluster *cl = rad_cluster_at(h, c);
-	if (cl->child == RAD_NONE)
+	if (rad_cluster_is_leaf(cl))
 		return;
 	bound_inner(h, cl->child);
 	bound_inner(h, cl->child + 1);
@@ -436,16 +436,16 @@ static void init_pools(rad_hier *h, rad_mem *mem, uint32_t shift, uint32_t n,
 	rad_pool_init(&h->links, mem, RAD_MEM_LINKS,
 	              lists ? sizeof(rad_hlink) : sizeof(rad_link),
 	              shift < 10 ? shift + 2 : 12, 0);
-	/* The same blocks as elems': the same ids for the same adds. */
-	rad_pool_init(&h->heads, mem, RAD_MEM_LINKS, sizeof(uint32_t), shift,
-	              n);
+	/* The same blocks as runs': the same ids for the same adds. */
+	rad_pool_init(&h->run_heads, mem, RAD_MEM_LINKS, sizeof(uint32_t),
+	              shift, 0);
 	rad_pool_init(&h->links_ext, mem, RAD_MEM_LINKS, sizeof(rad_link_ext),
 	              shift < 10 ? shift + 1 : 11, 0);
 }
 
 size_t rad_hier_grow_blocks(const rad_hier *h)
 {
-	const rad_pool *third = h->lists ? &h->heads : &h->links_ext;
+	const rad_pool *third = h->lists ? &h->run_heads : &h->links_ext;
 	return ((size_t)h->elems.rec_size << h->elems.shift) +
 	       ((size_t)h->runs.rec_size << h->runs.shift) +
 	       ((size_t)h->links.rec_size << h->links.shift) +
@@ -490,7 +490,6 @@ rad_status rad_hier_init(rad_hier *h, const rad_scene *s, rad_mem *mem,
 	h->run0 = (n + 3) & ~3u;
 	if (!h->order || !h->root_exposed || rad_pool_add(&h->elems, n) != 0 ||
 	    (h->run0 > n && rad_pool_add(&h->elems, h->run0 - n) != n) ||
-	    (lists && rad_pool_add(&h->heads, h->run0) != 0) ||
 	    rad_pool_add(&h->clusters, 1) != 0) {
 		rad_hier_destroy(h);
 		return rad_fail(err, RAD_ERR_NOMEM, "hierarchy: out of memory");
@@ -500,8 +499,6 @@ rad_status rad_hier_init(rad_hier *h, const rad_scene *s, rad_mem *mem,
 		h->root_exposed[i] = RAD_EXPOSED_ALL;
 		h->order[i] = i;
 	}
-	if (lists) /* the roots are one run, in block 0 */
-		no_links(rad_pool_at(&h->heads, 0), n);
 	h->nleaves = n;
 	/* After the roots' edges are known (rad_hier_cover_dist). */
 	if (s->vis)
@@ -511,11 +508,10 @@ rad_status rad_hier_init(rad_hier *h, const rad_scene *s, rad_mem *mem,
 	root->count = n;
 	rad_status st = build_clusters(h, par, err);
 	if (!st && lists) {
-		h->cluster_heads =
-		        rad_mem_alloc(mem, RAD_MEM_LINKS,
-		                      h->clusters.count * sizeof(uint32_t));
-		if (h->cluster_heads)
-			no_links(h->cluster_heads, h->clusters.count);
+		h->inner_heads = rad_mem_alloc(mem, RAD_MEM_LINKS,
+		                               h->ninner * sizeof(uint32_t));
+		if (h->inner_heads)
+			no_links(h->inner_heads, h->ninner);
 		else
 			st = rad_fail(err, RAD_ERR_NOMEM,
 			              "hierarchy: out of memory");
@@ -537,9 +533,9 @@ void rad_hier_destroy(rad_hier *h)
 	rad_pool_destroy(&h->clusters);
 	rad_pool_destroy(&h->links);
 	rad_pool_destroy(&h->links_ext);
-	rad_pool_destroy(&h->heads);
-	rad_mem_free(h->mem, RAD_MEM_LINKS, h->cluster_heads);
-	h->cluster_heads = NULL;
+	rad_pool_destroy(&h->run_heads);
+	rad_mem_free(h->mem, RAD_MEM_LINKS, h->inner_heads);
+	h->inner_heads = NULL;
 	rad_mem_free(h->mem, RAD_MEM_ELEM_CLUSTER, h->order);
 	h->order = NULL;
 	rad_mem_free(h->mem, RAD_MEM_ELEM_CLUSTER, h->inner);
@@ -650,7 +646,7 @@ void rad_elem_patch_id(const rad_hier *h, uint32_t id, rad_patch *p)
 uint32_t rad_elem_split(rad_hier *h, uint32_t id)
 {
 	rad_elem *e = rad_elem_at(h, id);
-	if (e->child != RAD_NONE)
+	if (!rad_elem_is_leaf(e))
 		return e->child;
 	uint32_t c = rad_pool_add(&h->elems, 4);
 	if (c == RAD_NONE)
@@ -658,22 +654,18 @@ uint32_t rad_elem_split(rad_hier *h, uint32_t id)
 	/* The run's record: runs are never released, so the next one made
 	 * is the one a new run needs (a reused run has its own already). */
 	uint32_t r = (c - h->run0) >> 2;
-	while (h->runs.count <= r)
-		if (rad_pool_add(&h->runs, 1) == RAD_NONE) {
+	while (h->runs.count <= r || (h->lists && h->run_heads.count <= r)) {
+		rad_pool *p = h->runs.count <= r ? &h->runs : &h->run_heads;
+		if (rad_pool_add(p, 1) == RAD_NONE) {
 			rad_pool_release_run(&h->elems, c, 4);
 			return RAD_NONE;
 		}
-	if (h->lists) {
-		uint32_t hc = rad_pool_add(&h->heads, 4);
-		if (hc != c) { /* out of memory (the pools stay in step) */
-			rad_pool_release_run(&h->elems, c, 4);
-			if (hc != RAD_NONE)
-				rad_pool_release_run(&h->heads, hc, 4);
-			return RAD_NONE;
-		}
-		no_links(rad_pool_at(&h->heads, c), 4);
 	}
 	e = rad_elem_at(h, id);
+	/* Its list (a leaf's, in its child field) moves to the run's word
+	 * (Leaves and lists). */
+	if (h->lists)
+		*(uint32_t *)rad_pool_at(&h->run_heads, r) = e->child;
 	rad_elem_run *run = rad_pool_at(&h->runs, r);
 	run->poly = rad_elem_poly(h, id);
 	run->level = (uint8_t)(rad_elem_level(h, id) + 1);
@@ -734,7 +726,7 @@ static int census_tree(const rad_hier *h, uint32_t id, uint64_t *n)
 	const rad_elem *e = rad_elem_at(h, id);
 	int d = RAD_ELEM_MAX_LEVEL;
 	++*n;
-	if (e->child == RAD_NONE)
+	if (rad_elem_is_leaf(e))
 		return 0;
 	for (uint32_t k = 0; k < 4; k++) {
 		int c = census_tree(h, e->child + k, n);
@@ -774,7 +766,7 @@ static void reset_tree(rad_hier *h, uint32_t id)
 	}
 	static const float zero[3] = {0, 0, 0};
 	rad_elem_set_dB(h, e, zero);
-	if (e->child != RAD_NONE)
+	if (!rad_elem_is_leaf(e))
 		for (uint32_t k = 0; k < 4; k++)
 			reset_tree(h, e->child + k);
 }
@@ -810,7 +802,7 @@ static void set_avg(float B[3], float dB[3], const double acc[6], double area)
 static void pull_elem(rad_hier *h, uint32_t id)
 {
 	rad_elem *e = rad_elem_at(h, id);
-	if (e->child == RAD_NONE)
+	if (rad_elem_is_leaf(e))
 		return;
 	double acc[6] = {0}, area = 0;
 	for (uint32_t k = 0; k < 4; k++) {
@@ -858,7 +850,7 @@ static void pull_deltas(const rad_hier *h, const rad_cluster *cl, float dB[3],
 	for (uint32_t k = 0; k < 2; k++) {
 		const rad_cluster *ch = rad_cluster_at(h, cl->child + k);
 		float cdB[3], cndB[3];
-		if (ch->child != RAD_NONE)
+		if (!rad_cluster_is_leaf(ch))
 			pull_deltas(h, ch, cdB, cndB, out, luma);
 		else
 			rad_cluster_delta(h, ch, cdB, cndB);
@@ -883,7 +875,7 @@ static void pull_deltas(const rad_hier *h, const rad_cluster *cl, float dB[3],
 void rad_cluster_delta(const rad_hier *h, const rad_cluster *cl, float dB[3],
                        float ndB[3])
 {
-	if (cl->child != RAD_NONE) {
+	if (!rad_cluster_is_leaf(cl)) {
 		float d[3], nd[3];
 		if (h->deltas) {
 			const rad_cluster_deltas *k =
@@ -935,7 +927,7 @@ rad_status rad_hier_keep_deltas(rad_hier *h, rad_error *err)
 			                "increments)");
 		memset(d, 0, h->ninner * sizeof(*d));
 		const rad_cluster *root = rad_cluster_at(h, 0);
-		if (root->child != RAD_NONE) {
+		if (!rad_cluster_is_leaf(root)) {
 			float dB[3], ndB[3];
 			pull_deltas(h, root, dB, ndB, d, NULL);
 		}
@@ -948,7 +940,7 @@ void rad_hier_delta_lumas(const rad_hier *h, double *out)
 {
 	const rad_cluster *root = rad_cluster_at(h, 0);
 	float dB[3], ndB[3];
-	if (root->child != RAD_NONE)
+	if (!rad_cluster_is_leaf(root))
 		pull_deltas(h, root, dB, ndB, NULL, out);
 }
 
@@ -966,7 +958,7 @@ static void pull_cluster(rad_hier *h, uint32_t id, float dB[3], float ndB[3])
 {
 	rad_cluster *cl = rad_cluster_at(h, id);
 	double acc[6] = {0}, nb[6] = {0};
-	if (cl->child == RAD_NONE) {
+	if (rad_cluster_is_leaf(cl)) {
 		leaf_sums(h, cl, acc, nb);
 		set_avg(cl->B, dB, acc, cl->area);
 		for (int c = 0; c < 3; c++) {
@@ -1039,7 +1031,7 @@ static void push_elem(const push_ctx *p, uint32_t id, const float up[3],
 	extra_add(p, id, upx, x);
 	for (int c = 0; c < 3; c++)
 		e->I[c] += up[c];
-	if (e->child == RAD_NONE) {
+	if (rad_elem_is_leaf(e)) {
 		p->leaf(p->h, id, e, p->extra ? x : NULL, p->ud);
 		return;
 	}
@@ -1096,7 +1088,7 @@ static void push_cluster(push_ctx *p, uint32_t id, const float up[3],
 	const rad_cluster *cl = rad_cluster_at(h, id);
 	float x[RAD_PUSH_EXTRA], si[3], sx[RAD_PUSH_EXTRA];
 	rad_cluster_flux f;
-	if (p->tasks && depth == PUSH_TASK_DEPTH && cl->child != RAD_NONE) {
+	if (p->tasks && depth == PUSH_TASK_DEPTH && !rad_cluster_is_leaf(cl)) {
 		push_task *t = &p->tasks[p->ntasks++];
 		t->id = id;
 		memcpy(t->up, up, sizeof(t->up));
@@ -1117,7 +1109,7 @@ static void push_cluster(push_ctx *p, uint32_t id, const float up[3],
 	double V[3] = {f.V[0], f.V[1], f.V[2]};
 	double vlen = sqrt(V[0] * V[0] + V[1] * V[1] + V[2] * V[2]);
 	double iso = 0.25 * fmax(0, f.S - vlen);
-	if (cl->child != RAD_NONE) {
+	if (!rad_cluster_is_leaf(cl)) {
 		const rad_cluster *k[2] = {rad_cluster_at(h, cl->child),
 		                           rad_cluster_at(h, cl->child + 1)};
 		double w[2], sum = 0;
@@ -1256,7 +1248,7 @@ static double proj_model(const rad_hier *h, const rad_cluster *c, double dx,
 static double proj_at(const rad_hier *h, const rad_cluster *c, double dx,
                       double dy, double dz, int depth)
 {
-	if (c->child == RAD_NONE) { /* a few polygons: exact */
+	if (rad_cluster_is_leaf(c)) { /* a few polygons: exact */
 		double p = 0;
 		for (uint32_t j = c->first; j < c->first + c->count; j++) {
 			const rad_poly *q = &h->scene->polys[h->order[j]];
@@ -1279,7 +1271,7 @@ double rad_cluster_proj(const rad_hier *h, const rad_cluster *c, double dx,
 
 void rad_cluster_normal(const rad_hier *h, const rad_cluster *c, float n[3])
 {
-	if (c->child != RAD_NONE) {
+	if (!rad_cluster_is_leaf(c)) {
 		memcpy(n, h->inner[rad_cluster_inner_index(c)].n,
 		       3 * sizeof(*n));
 		return;
@@ -1314,7 +1306,14 @@ double rad_cluster_emit(const rad_hier *h, const rad_cluster *c,
 
 uint32_t *rad_node_links(const rad_hier *h, uint32_t tagged)
 {
-	if (tagged & RAD_TAG_CLUSTER)
-		return &h->cluster_heads[tagged & ~RAD_TAG_MASK];
-	return rad_pool_at(&h->heads, tagged);
+	if (tagged & RAD_TAG_CLUSTER) {
+		rad_cluster *c = rad_cluster_at(h, tagged);
+		return rad_cluster_is_leaf(c)
+		               ? &c->child
+		               : &h->inner_heads[rad_cluster_inner_index(c)];
+	}
+	rad_elem *e = rad_elem_at(h, tagged);
+	return rad_elem_is_leaf(e)
+	               ? &e->child
+	               : rad_pool_at(&h->run_heads, (e->child - h->run0) >> 2);
 }

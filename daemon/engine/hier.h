@@ -18,8 +18,8 @@
  *     one of two kinds, the pool's records being the solver's.  Classic
  *     HR (rad_hlink, 12 bytes) chains them on their receiver's list, which
  *     says whose they are, and frees refined links; the lists' heads are
- *     hr's alone (rad_hier.heads, cluster_heads), not a field of every
- *     element and cluster record.  The reduced-memory
+ *     hr's alone, not a field of every element and cluster record (Leaves
+ *     and lists).  The reduced-memory
  *     solver (rad_link, 16 bytes) keeps no lists; a link names both its
  *     ends, and a refined (passive) one keeps its children (consecutive
  *     records) for the link hierarchy.  Only passive links have
@@ -28,6 +28,17 @@
  *     link in place of its spread, which moves there with it.  Active
  *     links -- two thirds of those rmb keeps -- are 16 bytes where one
  *     record for both kinds made every link 24.
+ *
+ * Leaves and lists.  A leaf has no children, so its child field holds
+ * its list's head (hr) or RAD_NONE: a list's links are named by their
+ * ids with RAD_HLIST set (rad_hlist_ref; RAD_NONE ends a list), and a
+ * child field with that bit set is a leaf's (rad_elem_is_leaf,
+ * rad_cluster_is_leaf; pools hand out ids below RAD_POOL_MAX_ID, so
+ * none has it).  An inner element's head is one word per sibling run,
+ * that of its children (rad_hier.run_heads, in step with runs), and an
+ * inner cluster's one per inner record (inner_heads).  A word for every
+ * node made hr hold 4 bytes an element and a cluster more: 1.8 MB of the
+ * report's grand hall, 4.5 MB of the 1M field (4 iterations).
  *
  * Liveness: walk the trees (polygon roots 0 .. npolys-1, root cluster 0),
  * never a pool's id range: pools may hold records skipped so that sibling
@@ -91,7 +102,7 @@
  * at 1/200 of the scene's diagonal.  Storing the region (36 bytes) and
  * the area made an element 96 bytes.  Nor does an element keep its
  * parent (the walks come down the trees, and progressive's fresh
- * children carry theirs) or hr's list head (rad_hier.heads).
+ * children carry theirs) or, but in its child field, hr's list head.
  * Runs.  What the four children of one split share -- their polygon,
  * their depth and their parent's path -- and the exposed fraction each
  * measured (below) are one record of the run (rad_elem_run, 16 bytes,
@@ -198,7 +209,8 @@
 #define RAD_CLUSTER_LEAF_MAX 4
 
 typedef struct rad_elem {
-	uint32_t child;   /* first of 4 children, RAD_NONE for a leaf */
+	uint32_t child;   /* first of 4 children; a leaf's: its hr list's
+	                     head, or RAD_NONE (Leaves and lists) */
 	float B[3], I[3]; /* see DESIGN */
 	rad_shared3 dB;   /* see DESIGN; read and write it with rad_elem_dB
 	                     and rad_elem_set_dB (Increments) */
@@ -218,7 +230,8 @@ typedef struct rad_elem_run {
 typedef struct rad_cluster {
 	float lo[3], hi[3];    /* bounding box of the contents */
 	float area;            /* total area of the polygons inside */
-	uint32_t child;        /* first of 2 child clusters, RAD_NONE = leaf */
+	uint32_t child;        /* first of 2 child clusters; a leaf's: as
+	                          rad_elem's */
 	uint32_t first, count; /* range of order[] covered */
 	float B[3];
 	float nB[3]; /* sum of area x luma(B) x normal (pull) */
@@ -345,6 +358,22 @@ static inline void rad_hlink_set(rad_hlink *l, float ff, float spread)
 	        rad_short_float(spread, RAD_HLINK_SPREAD_DROP);
 }
 
+/* Leaves and lists (DESIGN): a list's link ids carry RAD_HLIST. */
+#define RAD_HLIST 0x80000000u
+_Static_assert(RAD_POOL_MAX_ID <= RAD_HLIST, "ids must leave RAD_HLIST");
+static inline uint32_t rad_hlist_ref(uint32_t link)
+{
+	return link | RAD_HLIST;
+}
+static inline int rad_elem_is_leaf(const rad_elem *e)
+{
+	return (e->child & RAD_HLIST) != 0;
+}
+static inline int rad_cluster_is_leaf(const rad_cluster *c)
+{
+	return (c->child & RAD_HLIST) != 0;
+}
+
 /* Sizes the memory study measures by (Regions; links above). */
 _Static_assert(sizeof(rad_elem) == 32, "rad_elem grew");
 /* A record with dB in floats (Increments): the field and 8 bytes more. */
@@ -368,14 +397,16 @@ typedef struct rad_hier {
 	rad_pool clusters;     /* rad_cluster, ELEM_CLUSTER */
 	rad_pool links;        /* rad_link, or rad_hlink for hr; LINKS */
 	rad_pool links_ext;    /* rad_link_ext of passive rad_links; LINKS */
-	/* hr: the head of each node's list of links received (RAD_NONE:
-	 * none), LINKS: elements' in a pool made in step with elems (the
-	 * same ids), clusters' an array.  Without lists (other solvers)
-	 * both are empty. */
+	/* hr: the heads of the inner nodes' lists of links received
+	 * (RAD_NONE: none; a leaf's is its child field), LINKS: inner
+	 * elements' one per sibling run (their children's, a pool made in
+	 * step with runs: the same ids), inner clusters' one per inner
+	 * record (Leaves and lists).  Without lists (other solvers) both
+	 * are empty. */
 	int lists;
 	int exact_dB; /* elements keep dB in floats (Increments) */
-	rad_pool heads;
-	uint32_t *cluster_heads;
+	rad_pool run_heads;
+	uint32_t *inner_heads;
 	uint32_t *order; /* polygon ids in cluster order, ELEM_CLUSTER */
 	rad_cluster_inner *inner;   /* inner clusters' records, ELEM_CLUSTER */
 	rad_cluster_flux *flux;     /* rmb: one per cluster, ELEM_CLUSTER
@@ -466,9 +497,10 @@ static inline rad_link *rad_link_at(const rad_hier *h, uint32_t id)
 {
 	return (rad_link *)rad_pool_at(&h->links, id);
 }
+/* An hr link by its id or its list reference (Leaves and lists). */
 static inline rad_hlink *rad_hlink_at(const rad_hier *h, uint32_t id)
 {
-	return (rad_hlink *)rad_pool_at(&h->links, id);
+	return (rad_hlink *)rad_pool_at(&h->links, id & ~RAD_HLIST);
 }
 
 #define RAD_EXPOSED_ALL 255u
@@ -528,8 +560,8 @@ double rad_hier_cover_dist(const rad_hier *h, uint32_t poly);
  * On failure everything allocated is released.
  */
 /* Bytes of a block of each pool that grows: elements, links, and hr's
- * list heads or rmb's passive links' records (a budget keeps them free:
- * wave_room_for). */
+ * inner elements' list heads or rmb's passive links' records (a budget keeps
+ * them free: wave_room_for). */
 size_t rad_hier_grow_blocks(const rad_hier *h);
 rad_status rad_hier_init(rad_hier *h, const rad_scene *s, rad_mem *mem,
                          double min_edge, int lists, int exact_dB, rad_par *par,
@@ -753,7 +785,9 @@ static inline void rad_cluster_took(rad_cluster_flux *c, double e, double dx,
 	c->S += (float)e;
 }
 
-/* Head pointer of a node's received-links list (element or cluster). */
+/* Where the head of a node's received-links list is (element or cluster;
+ * Leaves and lists): its child field if a leaf, its run's or inner
+ * record's word if not.  A split moves a leaf's head (rad_elem_split). */
 uint32_t *rad_node_links(const rad_hier *h, uint32_t tagged);
 
 #endif

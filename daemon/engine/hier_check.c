@@ -53,7 +53,8 @@ static int check_links(checker *c, uint32_t head, uint32_t tagged)
 	const rad_hier *h = c->h;
 	uint64_t seen = 0;
 	for (uint32_t l = head; l != RAD_NONE; l = rad_hlink_at(h, l)->next) {
-		if (l >= h->links.count || ++seen > h->links.count)
+		if (!(l & RAD_HLIST) || (l & ~RAD_HLIST) >= h->links.count ||
+		    ++seen > h->links.count)
 			return fail(c, "link list leaves the pool or loops",
 			            tagged);
 		const rad_hlink *k = rad_hlink_at(h, l);
@@ -70,17 +71,23 @@ static int check_elem(checker *c, uint32_t id)
 {
 	const rad_hier *h = c->h;
 	const rad_elem *e = rad_elem_at(h, id);
+	int leaf = rad_elem_is_leaf(e);
+	if (leaf && !h->lists && e->child != RAD_NONE)
+		return fail(c, "leaf holds a list in a solver without", id);
+	if (!leaf && (uint64_t)e->child + 4 > h->elems.count)
+		return fail(c, "element's children outside the pool", id);
+	if (!leaf &&
+	    (e->child < h->run0 || (e->child - h->run0) % 4 != 0 ||
+	     (e->child - h->run0) / 4 >= h->runs.count ||
+	     (h->lists && (e->child - h->run0) / 4 >= h->run_heads.count)))
+		return fail(c, "children are not a run of their own", id);
+	/* Where the list is depends on the child field checked above. */
 	if (h->lists && check_links(c, *rad_node_links(h, id), id) != 0)
 		return -1;
-	if (e->child == RAD_NONE) {
+	if (leaf) {
 		c->leaves++;
 		return 0;
 	}
-	if ((uint64_t)e->child + 4 > h->elems.count)
-		return fail(c, "element's children outside the pool", id);
-	if (e->child < h->run0 || (e->child - h->run0) % 4 != 0 ||
-	    (e->child - h->run0) / 4 >= h->runs.count)
-		return fail(c, "children are not a run of their own", id);
 	int level = rad_elem_level(h, id);
 	uint32_t path = rad_elem_path(h, id);
 	for (uint32_t k = 0; k < 4; k++) {
@@ -104,10 +111,17 @@ static int check_cluster(checker *c, uint32_t id, unsigned depth)
 	const rad_cluster *cl = rad_cluster_at(h, id);
 	if (depth > 64)
 		return fail(c, "cluster tree deeper than 64", id);
+	int leaf = rad_cluster_is_leaf(cl);
+	if (leaf && !h->lists && cl->child != RAD_NONE)
+		return fail(c, "leaf holds a list in a solver without", id);
+	if (!leaf &&
+	    ((uint64_t)cl->child + 2 > h->clusters.count || cl->child == 0 ||
+	     rad_cluster_inner_index(cl) >= h->ninner))
+		return fail(c, "cluster's children outside the pool", id);
 	if (h->lists && check_links(c, *rad_node_links(h, id | RAD_TAG_CLUSTER),
 	                            id | RAD_TAG_CLUSTER) != 0)
 		return -1;
-	if (cl->child == RAD_NONE) {
+	if (leaf) {
 		if (cl->count > RAD_CLUSTER_LEAF_MAX)
 			return fail(c, "leaf cluster of too many polygons", id);
 		if (cl->count < RAD_CLUSTER_LEAF_MAX &&
@@ -115,8 +129,6 @@ static int check_cluster(checker *c, uint32_t id, unsigned depth)
 			return fail(c, "leaf cluster not full", id);
 		return 0;
 	}
-	if ((uint64_t)cl->child + 2 > h->clusters.count)
-		return fail(c, "cluster's children outside the pool", id);
 	const rad_cluster *a = rad_cluster_at(h, cl->child);
 	const rad_cluster *b = rad_cluster_at(h, cl->child + 1);
 	if (a->first != cl->first || b->first != a->first + a->count ||

@@ -145,7 +145,7 @@ static void gather_tree(gather_job *g, uint32_t id, double took[3])
 {
 	rad_elem *e = rad_elem_at(g->h, id);
 	gather_list(g, id, *rad_node_links(g->h, id), e->I, NULL, took);
-	if (e->child != RAD_NONE)
+	if (!rad_elem_is_leaf(e))
 		for (uint32_t k = 0; k < 4; k++)
 			gather_tree(g, e->child + k, took);
 }
@@ -198,7 +198,7 @@ static void gather_clusters(gather_job *g, uint32_t id, double took[3])
 {
 	const rad_cluster *cl = rad_cluster_at(g->h, id);
 	gather_cluster(g, id, &g->h->flux[id], took);
-	if (cl->child != RAD_NONE) {
+	if (!rad_cluster_is_leaf(cl)) {
 		gather_clusters(g, cl->child, took);
 		gather_clusters(g, cl->child + 1, took);
 	}
@@ -222,14 +222,14 @@ static void clusters_took(gather_job *g, uint32_t id, unsigned depth,
                           took_tasks *t, double took[3])
 {
 	const rad_cluster *cl = rad_cluster_at(g->h, id);
-	if (t && depth == TOOK_TASK_DEPTH && cl->child != RAD_NONE) {
+	if (t && depth == TOOK_TASK_DEPTH && !rad_cluster_is_leaf(cl)) {
 		t->id[t->n++] = id;
 		return;
 	}
 	gather_list(g, id | RAD_TAG_CLUSTER,
 	            *rad_node_links(g->h, id | RAD_TAG_CLUSTER), NULL, NULL,
 	            took);
-	if (cl->child != RAD_NONE) {
+	if (!rad_cluster_is_leaf(cl)) {
 		clusters_took(g, cl->child, depth + 1, t, took);
 		clusters_took(g, cl->child + 1, depth + 1, t, took);
 	}
@@ -437,7 +437,7 @@ static rad_status study_node(rad_solver *sv, void *ud, uint32_t t)
 			const rad_cluster *c = rad_cluster_at(h, l->src);
 			float d[3];
 			b = inc = rad_luma(c->B);
-			if (!first && c->child != RAD_NONE) {
+			if (!first && !rad_cluster_is_leaf(c)) {
 				inc = fabs(dluma[rad_cluster_inner_index(c)]);
 			} else if (!first) {
 				rad_cluster_delta(h, c, d, NULL);

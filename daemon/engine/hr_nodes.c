@@ -123,7 +123,7 @@ int node_children(rad_hier *h, uint32_t t, uint32_t out[RAD_CLUSTER_LEAF_MAX])
 {
 	if (node_is_cluster(t)) {
 		const rad_cluster *c = rad_cluster_at(h, t);
-		if (c->child != RAD_NONE) {
+		if (!rad_cluster_is_leaf(c)) {
 			out[0] = (c->child) | RAD_TAG_CLUSTER;
 			out[1] = (c->child + 1) | RAD_TAG_CLUSTER;
 			return 2;
@@ -463,7 +463,7 @@ int node_tail_rates(const double *chg, double q[3])
 static void tail_tree(rad_hier *h, uint32_t id, const double k[3])
 {
 	rad_elem *e = rad_elem_at(h, id);
-	if (e->child != RAD_NONE) {
+	if (!rad_elem_is_leaf(e)) {
 		for (uint32_t c = 0; c < 4; c++)
 			tail_tree(h, e->child + c, k);
 		return;

@@ -112,7 +112,7 @@ static rad_status store_link(rad_solver *sv, uint32_t r, uint32_t s, float ff,
 	l->src = s;
 	rad_hlink_set(l, ff, spread);
 	l->next = *head;
-	*head = id;
+	*head = rad_hlist_ref(id);
 	sv->stats.links_created++;
 	return RAD_OK;
 }
@@ -338,13 +338,13 @@ rad_status hr_initial_links(rad_solver *sv, hr_state *st)
 static rad_status requeue(rad_solver *sv, hr_state *st, uint32_t r,
                           uint32_t *prev, int rcv_only)
 {
-	uint32_t id = *prev;
-	rad_hlink *l = rad_hlink_at(&sv->h, id);
+	uint32_t ref = *prev;
+	rad_hlink *l = rad_hlink_at(&sv->h, ref);
 	rad_status rs = hold_pair(sv, st, r, l->src, rcv_only);
 	if (rs)
 		return rs;
 	*prev = l->next;
-	rad_pool_release(&sv->h.links, id);
+	rad_pool_release(&sv->h.links, ref & ~RAD_HLIST);
 	sv->stats.links_deleted++;
 	return RAD_OK;
 }
@@ -479,9 +479,9 @@ static rad_status retest_elem(rad_solver *sv, hr_state *st, uint32_t id,
 	double kept;
 	rad_status rs =
 	        retest_list(sv, st, id, local_limit(sv, id) - above, &kept);
-	uint32_t c = rad_elem_at(&sv->h, id)->child;
-	for (uint32_t k = 0; k < 4 && !rs && c != RAD_NONE; k++)
-		rs = retest_elem(sv, st, c + k, above + kept);
+	const rad_elem *e = rad_elem_at(&sv->h, id);
+	for (uint32_t k = 0; k < 4 && !rs && !rad_elem_is_leaf(e); k++)
+		rs = retest_elem(sv, st, e->child + k, above + kept);
 	return rs;
 }
 
@@ -489,9 +489,9 @@ static rad_status walk_elem(rad_solver *sv, uint32_t id, hr_node_fn fn,
                             void *ud)
 {
 	rad_status rs = fn(sv, ud, id);
-	uint32_t c = rad_elem_at(&sv->h, id)->child;
-	for (uint32_t k = 0; k < 4 && !rs && c != RAD_NONE; k++)
-		rs = walk_elem(sv, c + k, fn, ud);
+	const rad_elem *e = rad_elem_at(&sv->h, id);
+	for (uint32_t k = 0; k < 4 && !rs && !rad_elem_is_leaf(e); k++)
+		rs = walk_elem(sv, e->child + k, fn, ud);
 	return rs;
 }
 
@@ -499,9 +499,9 @@ static rad_status walk_cluster(rad_solver *sv, uint32_t id, hr_node_fn fn,
                                void *ud)
 {
 	rad_status rs = fn(sv, ud, id | RAD_TAG_CLUSTER);
-	uint32_t c = rad_cluster_at(&sv->h, id)->child;
-	for (uint32_t k = 0; k < 2 && !rs && c != RAD_NONE; k++)
-		rs = walk_cluster(sv, c + k, fn, ud);
+	const rad_cluster *c = rad_cluster_at(&sv->h, id);
+	for (uint32_t k = 0; k < 2 && !rs && !rad_cluster_is_leaf(c); k++)
+		rs = walk_cluster(sv, c->child + k, fn, ud);
 	return rs;
 }
 
@@ -535,9 +535,9 @@ static void walk_top(walk_par *w, uint32_t id, int depth)
 		return;
 	}
 	w->fn(w->sv, w->uds, id | RAD_TAG_CLUSTER);
-	uint32_t c = rad_cluster_at(&w->sv->h, id)->child;
-	for (uint32_t k = 0; k < 2 && c != RAD_NONE; k++)
-		walk_top(w, c + k, depth - 1);
+	const rad_cluster *c = rad_cluster_at(&w->sv->h, id);
+	for (uint32_t k = 0; k < 2 && !rad_cluster_is_leaf(c); k++)
+		walk_top(w, c->child + k, depth - 1);
 }
 
 static void walk_tasks(void *ud, size_t begin, size_t end, int thread)

@@ -122,7 +122,7 @@ static void collect_leaves(const rad_hier *h, uint32_t id, uint32_t *out,
                            uint32_t *n)
 {
 	const rad_elem *e = rad_elem_at(h, id);
-	if (e->child == RAD_NONE) {
+	if (rad_elem_is_leaf(e)) {
 		out[(*n)++] = id;
 		return;
 	}

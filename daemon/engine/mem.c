@@ -406,7 +406,7 @@ uint32_t rad_pool_add(rad_pool *p, uint32_t n)
 			return RAD_NONE;
 		id = end;
 	}
-	if ((uint64_t)id + n >= RAD_NONE || !pool_reserve(p, id + n - 1))
+	if ((uint64_t)id + n > RAD_POOL_MAX_ID || !pool_reserve(p, id + n - 1))
 		return RAD_NONE;
 	for (uint32_t s = p->count; s < id; s++)
 		rad_pool_release_run(p, s, 1);

@@ -119,7 +119,10 @@ char *rad_mem_strdup(rad_mem *m, rad_mem_kind kind, const char *s);
 /* ------------------------------------------------------------ stable pool */
 
 #define RAD_NONE UINT32_MAX /* the null id */
-#define RAD_POOL_RUNMAX 16  /* longest run with a free list of its own */
+/* Ids a pool hands out are below this: the top bit stays free for tags
+ * (hier.h, Leaves and lists), and a tagged id is never RAD_NONE. */
+#define RAD_POOL_MAX_ID 0x7fffffffu
+#define RAD_POOL_RUNMAX 16 /* longest run with a free list of its own */
 
 typedef struct rad_pool {
 	rad_mem *mem;

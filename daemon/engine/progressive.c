@@ -140,7 +140,7 @@ static void prog_destroy(rad_solver *sv)
 static void leaf_ids(const rad_hier *h, uint32_t id, uint32_t *out, uint32_t *n)
 {
 	const rad_elem *e = rad_elem_at(h, id);
-	if (e->child == RAD_NONE) {
+	if (rad_elem_is_leaf(e)) {
 		if (out)
 			out[*n] = id;
 		(*n)++;
@@ -301,7 +301,7 @@ static void leaf_items(const rad_hier *h, uint32_t id, uint32_t patch,
                        rcv_item *out, size_t *n)
 {
 	const rad_elem *e = rad_elem_at(h, id);
-	if (e->child == RAD_NONE) {
+	if (rad_elem_is_leaf(e)) {
 		out[(*n)++] = (rcv_item){.elem = id, .patch = patch};
 		return;
 	}

@@ -259,7 +259,7 @@ static void gather_elem(gather *g, uint32_t id, const region *re,
 	double F = rad_ff_point_patch(g->x, g->n, &p);
 	if (F <= 0)
 		return;
-	if (e->child == RAD_NONE) {
+	if (rad_elem_is_leaf(e)) {
 		double fv = whole ? query_visible_ff(g, &p, F, r, memo)
 		                  : covered_ff(g, id, &p, F, r);
 		g->total += r * fv;
@@ -429,7 +429,7 @@ static void gather_cluster(gather *g, uint32_t cid)
 			return;
 		}
 	}
-	if (c->child == RAD_NONE) {
+	if (rad_cluster_is_leaf(c)) {
 		for (uint32_t k = c->first; k < c->first + c->count; k++)
 			gather_poly(g, g->h->order[k]);
 		return;
@@ -591,7 +591,7 @@ static void leaves_below(const rad_hier *h, uint32_t id, rad_leaf_fn fn,
                          void *ud)
 {
 	const rad_elem *e = rad_elem_at(h, id);
-	if (e->child != RAD_NONE) {
+	if (!rad_elem_is_leaf(e)) {
 		for (uint32_t k = 0; k < 4; k++)
 			leaves_below(h, e->child + k, fn, ud);
 		return;

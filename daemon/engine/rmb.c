@@ -71,19 +71,19 @@ static void zero_I(rad_hier *h, uint32_t t, double *held)
 	if (node_is_cluster(t)) {
 		const rad_cluster *c = rad_cluster_at(h, t);
 		memset(&h->flux[t & ~RAD_TAG_MASK], 0, sizeof(*h->flux));
-		if (c->child != RAD_NONE) {
+		if (!rad_cluster_is_leaf(c)) {
 			zero_I(h, (c->child) | RAD_TAG_CLUSTER, held);
 			zero_I(h, (c->child + 1) | RAD_TAG_CLUSTER, held);
 		}
 		return;
 	}
 	rad_elem *e = rad_elem_at(h, t);
-	if (held && e->child == RAD_NONE) {
+	if (held && rad_elem_is_leaf(e)) {
 		hold_leaf(h, t, e, held);
 		return;
 	}
 	memset(e->I, 0, sizeof(e->I));
-	if (e->child != RAD_NONE)
+	if (!rad_elem_is_leaf(e))
 		for (uint32_t k = 0; k < 4; k++)
 			zero_I(h, e->child + k, held);
 }
@@ -108,7 +108,7 @@ static void node_power(const rad_hier *h, uint32_t id, double P[3])
 	const rad_elem *e = rad_elem_at(h, id);
 	for (int c = 0; c < 3; c++)
 		P[c] += (double)rad_elem_area(h, id) * e->I[c];
-	if (e->child != RAD_NONE)
+	if (!rad_elem_is_leaf(e))
 		for (uint32_t k = 0; k < 4; k++)
 			node_power(h, e->child + k, P);
 }
@@ -120,7 +120,7 @@ static void cluster_power(const rad_hier *h, uint32_t id, double P[3])
 	const float *I = h->flux[id & ~RAD_TAG_MASK].I;
 	for (int k = 0; k < 3; k++)
 		P[k] += (double)c->area * I[k];
-	if (c->child != RAD_NONE) {
+	if (!rad_cluster_is_leaf(c)) {
 		cluster_power(h, c->child | RAD_TAG_CLUSTER, P);
 		cluster_power(h, (c->child + 1) | RAD_TAG_CLUSTER, P);
 	}
@@ -133,7 +133,7 @@ static void scale_I(rad_hier *h, uint32_t t, const double k[3])
 		float *I = h->flux[t & ~RAD_TAG_MASK].I;
 		for (int i = 0; i < 3; i++)
 			I[i] = (float)(I[i] * k[i]);
-		if (c->child != RAD_NONE) {
+		if (!rad_cluster_is_leaf(c)) {
 			scale_I(h, c->child | RAD_TAG_CLUSTER, k);
 			scale_I(h, (c->child + 1) | RAD_TAG_CLUSTER, k);
 		}
@@ -142,7 +142,7 @@ static void scale_I(rad_hier *h, uint32_t t, const double k[3])
 	rad_elem *e = rad_elem_at(h, t);
 	for (int i = 0; i < 3; i++)
 		e->I[i] = (float)(e->I[i] * k[i]);
-	if (e->child != RAD_NONE)
+	if (!rad_elem_is_leaf(e))
 		for (uint32_t c = 0; c < 4; c++)
 			scale_I(h, e->child + c, k);
 }

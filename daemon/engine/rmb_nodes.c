@@ -44,7 +44,7 @@ double rmb_mark_black(rad_solver *sv, uint32_t id)
 	rmb_state *st = sv->impl;
 	const rad_cluster *c = rad_cluster_at(&sv->h, id);
 	double a = 0, rm = 0;
-	if (c->child != RAD_NONE) {
+	if (!rad_cluster_is_leaf(c)) {
 		a += rmb_mark_black(sv, c->child);
 		a += rmb_mark_black(sv, c->child + 1);
 		rm = fmax(st->rhomax[c->child], st->rhomax[c->child + 1]);

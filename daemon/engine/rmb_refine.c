@@ -729,7 +729,7 @@ static rad_status mark_cuts(rad_solver *sv, rmb_state *st, uint32_t id,
 			st->cut[id] = c;
 	}
 	const rad_elem *e = rad_elem_at(&sv->h, id);
-	if (e->child == RAD_NONE)
+	if (rad_elem_is_leaf(e))
 		return RAD_OK;
 	for (uint32_t k = 0; k < 4; k++) {
 		rad_status rs = mark_cuts(sv, st, e->child + k, tot);

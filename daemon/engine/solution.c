@@ -152,7 +152,7 @@ void rad_solution_free(rad_solution *s)
 static uint32_t count_below(const rad_hier *h, uint32_t id)
 {
 	const rad_elem *e = rad_elem_at(h, id);
-	if (e->child == RAD_NONE)
+	if (rad_elem_is_leaf(e))
 		return 1;
 	uint32_t n = 1;
 	for (uint32_t k = 0; k < 4; k++)
@@ -163,18 +163,20 @@ static uint32_t count_below(const rad_hier *h, uint32_t id)
 static uint32_t count_clusters(const rad_hier *h, uint32_t id)
 {
 	const rad_cluster *c = rad_cluster_at(h, id);
-	if (c->child == RAD_NONE)
+	if (rad_cluster_is_leaf(c))
 		return 1;
 	return 1 + count_clusters(h, c->child) +
 	       count_clusters(h, c->child + 1);
 }
 
 /* Element id of src as a solution keeps it: dB packed (hier.h,
- * Increments). */
+ * Increments), and no list in a leaf's child field (Leaves and lists). */
 static rad_elem sol_elem(const rad_hier *src, uint32_t id)
 {
 	const rad_elem *e = rad_elem_at(src, id);
 	rad_elem out = *e;
+	if (rad_elem_is_leaf(e))
+		out.child = RAD_NONE;
 	float dB[3];
 	rad_elem_dB(src, e, dB);
 	out.dB = rad_shared3_pack(dB);
@@ -196,7 +198,7 @@ static uint32_t copy_elems(const rad_hier *src, rad_hier *dst)
 	memcpy(dst->root_exposed, src->root_exposed, np);
 	for (uint32_t i = 0; i < next; i++) {
 		rad_elem *e = &out[i];
-		if (e->child == RAD_NONE) {
+		if (rad_elem_is_leaf(e)) {
 			leaves++;
 			continue;
 		}
@@ -217,8 +219,10 @@ static void copy_clusters(const rad_hier *src, rad_hier *dst)
 	out[0] = *rad_cluster_at(src, 0);
 	for (uint32_t i = 0; i < next; i++) {
 		rad_cluster *c = &out[i];
-		if (c->child == RAD_NONE)
+		if (rad_cluster_is_leaf(c)) {
+			c->child = RAD_NONE; /* no list (hier.h) */
 			continue;
+		}
 		uint32_t first = next;
 		const rad_cluster_inner *mo =
 		        &src->inner[rad_cluster_inner_index(c)];

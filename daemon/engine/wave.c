@@ -183,13 +183,13 @@ static int split_side(const rad_hier *h, uint32_t r, uint32_t s, int rcv_only)
 	return rs ? 1 : 2;
 }
 
-/* Bytes an element split takes: four elements, their run's record, hr's
- * list heads for them, and the solver's scratch for them. */
+/* Bytes an element split takes: four elements, their run's record and
+ * hr's list head for the parent (hier.h, Leaves and lists), and the
+ * solver's scratch for them. */
 static size_t elem_split_bytes(const rad_hier *h, const rad_wave *w)
 {
-	return sizeof(rad_elem_run) +
-	       4 * (h->elems.rec_size + (h->lists ? sizeof(uint32_t) : 0) +
-	            w->elem_extra);
+	return sizeof(rad_elem_run) + (h->lists ? sizeof(uint32_t) : 0) +
+	       4 * (h->elems.rec_size + w->elem_extra);
 }
 
 /* 1 if splitting the pair item starts with makes no element and no link
@@ -206,7 +206,7 @@ static int free_split(const rad_solver *sv, const rad_wave *w,
 	int side = split_side(h, rs[0], rs[1], rcv_only);
 	for (int k = 0; k < 2; k++)
 		if ((side & (1 << k)) && !node_is_cluster(rs[k]) &&
-		    rad_elem_at(h, rs[k])->child == RAD_NONE)
+		    rad_elem_is_leaf(rad_elem_at(h, rs[k])))
 			return 0;
 	return 1;
 }
@@ -431,9 +431,9 @@ static int child_count(const rad_hier *h, uint32_t t, int *splits)
 {
 	if (node_is_cluster(t)) {
 		const rad_cluster *c = rad_cluster_at(h, t);
-		return c->child != RAD_NONE ? 2 : (int)c->count;
+		return !rad_cluster_is_leaf(c) ? 2 : (int)c->count;
 	}
-	*splits += rad_elem_at(h, t)->child == RAD_NONE;
+	*splits += rad_elem_is_leaf(rad_elem_at(h, t));
 	return 4;
 }
 

@@ -515,6 +515,45 @@ static void test_elem_regions_derived(void **state)
 	rad_scene_free(s);
 }
 
+/*
+ * hr's lists by kind (hier.h, Leaves and lists): a linked leaf's head is
+ * its child field; split, the list stays its own, in its children's
+ * run's word, and the children start with none; a list's link named
+ * without its tag is found broken.
+ */
+static void check_leaf_lists(rad_hier *h)
+{
+	char msg[256];
+	uint32_t leaf = RAD_NONE;
+	for (uint32_t i = 0; i < h->scene->npolys && leaf == RAD_NONE; i++) {
+		uint32_t id = i;
+		while (!rad_elem_is_leaf(rad_elem_at(h, id)))
+			id = rad_elem_at(h, id)->child;
+		if (*rad_node_links(h, id) != RAD_NONE)
+			leaf = id;
+	}
+	assert_true(leaf != RAD_NONE);
+	rad_elem *e = rad_elem_at(h, leaf);
+	assert_ptr_equal(rad_node_links(h, leaf), &e->child);
+	uint32_t head = e->child;
+	assert_true((head & RAD_HLIST) != 0);
+	uint32_t c = rad_elem_split(h, leaf);
+	assert_true(c != RAD_NONE && c == e->child);
+	assert_int_equal(*rad_node_links(h, leaf), head);
+	assert_ptr_equal(rad_node_links(h, leaf),
+	                 rad_pool_at(&h->run_heads, (c - h->run0) >> 2));
+	for (uint32_t k = 0; k < 4; k++) {
+		assert_true(rad_elem_is_leaf(rad_elem_at(h, c + k)));
+		assert_int_equal(*rad_node_links(h, c + k), RAD_NONE);
+	}
+	assert_int_equal(rad_hier_check(h, msg, sizeof(msg)), 0);
+	*rad_node_links(h, leaf) = head & ~RAD_HLIST;
+	assert_int_equal(rad_hier_check(h, msg, sizeof(msg)), -1);
+	assert_non_null(strstr(msg, "leaves the pool"));
+	*rad_node_links(h, leaf) = head;
+	assert_int_equal(rad_hier_check(h, msg, sizeof(msg)), 0);
+}
+
 static void test_hier_invariants(void **state)
 {
 	(void)state;
@@ -537,8 +576,10 @@ static void test_hier_invariants(void **state)
 			/* Records 0 .. count-1 are live here: nothing was
 			 * released in two steps of hr. */
 			for (uint32_t i = 0; i < h->elems.count; i++) {
+				if (i >= h->scene->npolys && i < h->run0)
+					continue; /* the pad before the runs */
 				rad_elem *e = rad_elem_at(h, i);
-				if (e->child != RAD_NONE && split == RAD_NONE)
+				if (!rad_elem_is_leaf(e) && split == RAD_NONE)
 					split = i;
 				if (*rad_node_links(h, i) != RAD_NONE &&
 				    linked == RAD_NONE)
@@ -559,6 +600,17 @@ static void test_hier_invariants(void **state)
 			l->src = src;
 			assert_int_equal(rad_hier_check(h, msg, sizeof(msg)),
 			                 0);
+			check_leaf_lists(h);
+		} else {
+			/* Without lists a leaf's child field is RAD_NONE. */
+			rad_elem *e = rad_elem_at(&sv->h, 0);
+			while (!rad_elem_is_leaf(e))
+				e = rad_elem_at(&sv->h, e->child);
+			e->child = rad_hlist_ref(0);
+			assert_int_equal(
+			        rad_hier_check(&sv->h, msg, sizeof(msg)), -1);
+			assert_non_null(strstr(msg, "leaf holds a list"));
+			e->child = RAD_NONE;
 		}
 		rad_solver_free(sv);
 	}
@@ -1046,7 +1098,7 @@ cluster_walk(const rad_hier *h,
 		const rad_cluster *c = rad_cluster_at(h, id);
 		fn(h, id, ud);
 		seen++;
-		if (c->child == RAD_NONE)
+		if (rad_cluster_is_leaf(c))
 			continue;
 		assert_true(n + 2 <= 64);
 		stack[n++] = c->child + 1;
@@ -1087,7 +1139,7 @@ static void check_light(const rad_hier *h, uint32_t id, void *ud)
 	expect_near(gdB, dB, lc->top, "dB", id);
 	expect_near(gndB, ndB, lc->top * c->area, "ndB", id);
 	lc->moved += rad_luma(gdB) != 0;
-	if (c->child == RAD_NONE)
+	if (rad_cluster_is_leaf(c))
 		lc->leaves++;
 	else
 		lc->inner++;
@@ -1124,7 +1176,7 @@ static void check_deltas(const rad_hier *h, uint32_t id, void *ud)
 {
 	deltas_seen *ds = ud;
 	const rad_cluster *c = rad_cluster_at(h, id);
-	if (c->child == RAD_NONE)
+	if (rad_cluster_is_leaf(c))
 		return;
 	uint32_t k = rad_cluster_inner_index(c);
 	float dB[3], ndB[3];
@@ -1184,7 +1236,7 @@ static void count_leaf(const rad_hier *h, uint32_t id, void *ud)
 {
 	leaf_count *lc = ud;
 	const rad_cluster *c = rad_cluster_at(h, id);
-	if (c->child != RAD_NONE)
+	if (!rad_cluster_is_leaf(c))
 		return;
 	lc->leaves++;
 	assert_true(c->count >= 1 && c->count <= RAD_CLUSTER_LEAF_MAX);
