@@ -211,25 +211,76 @@ static rad_status shape_tree(rad_hier *h, uint32_t c, rad_error *err)
 	return st ? st : shape_tree(h, kids + 1, err);
 }
 
+/* What a subtree's polygons add up to: area, sum of area x unit normal,
+ * and moments (fill_cluster). */
+typedef struct fill_sums {
+	double area, n[3], m[6];
+} fill_sums;
+
+static void sums_add_poly(fill_sums *s, const rad_poly *p)
+{
+	v3 an = rad_poly_an(p);
+	s->area += p->area;
+	s->n[0] += an.x;
+	s->n[1] += an.y;
+	s->n[2] += an.z;
+	moments_add(s->m, p->area, rad_poly_normal(p));
+}
+
+/* A leaf cluster's sums, over its polygons in order[]. */
+static void sums_of_leaf(const rad_hier *h, const rad_cluster *cl, fill_sums *s)
+{
+	memset(s, 0, sizeof(*s));
+	for (uint32_t i = cl->first; i < cl->first + cl->count; i++)
+		sums_add_poly(s, &h->scene->polys[h->order[i]]);
+}
+
+/* Inner cluster cl's area and model from its children's sums a and b,
+ * which become its own in *a. */
+static void sums_to_inner(rad_hier *h, rad_cluster *cl, fill_sums *a,
+                          const fill_sums *b)
+{
+	a->area += b->area;
+	for (int k = 0; k < 3; k++)
+		a->n[k] += b->n[k];
+	for (int k = 0; k < 6; k++)
+		a->m[k] += b->m[k];
+	cl->area = (float)a->area;
+	rad_cluster_inner *mo = &h->inner[rad_cluster_inner_index(cl)];
+	for (int k = 0; k < 6; k++)
+		mo->m[k] = (float)a->m[k];
+	for (int k = 0; k < 3; k++)
+		mo->n[k] = (float)a->n[k];
+	double rg = sphere_mean_sqrt(a->m);
+	mo->q = rg > 0 ? (float)(a->area / (2 * rg)) : 0;
+}
+
 /* What fill_cluster hands over to the threads: the subtrees below
- * `depth` levels (FILL_DEPTH), their roots in `roots`. */
+ * `depth` levels (FILL_DEPTH), their roots in `roots`, and what each
+ * adds up to, for the levels above (fill_top). */
 #define FILL_DEPTH 5
 typedef struct fill_work {
 	rad_hier *h;
 	const double *ctr;
 	uint32_t roots[1u << FILL_DEPTH];
+	fill_sums sums[1u << FILL_DEPTH];
 	uint32_t nroots;
 } fill_work;
 
-/* Fill cluster c's subtree (shape_tree made it): area, normal sum and
- * moments, a leaf's bounds (an inner cluster's are its children's:
- * bound_inner), and order[] split between the children along the
- * longest axis of the centroids; ctr: the polygons' centroids, 3 per
- * polygon.  With w, the subtrees `depth` levels down are left in w->roots
- * instead.  A subtree reads and writes only its own clusters, models and
- * range of order[], so who fills it does not change the tree. */
+/* Fill cluster c's subtree (shape_tree made it): order[] split between
+ * the children along the longest axis of the centroids (ctr: 3 per
+ * polygon), a leaf's bounds (an inner cluster's are its children's:
+ * bound_inner), and, post-order, the area and the model of every
+ * cluster, an inner one's from its children's sums (into *out): each
+ * polygon is read once, not once a level (the 1M field's setup, 2
+ * threads: 0.46 -> 0.41 s; lux within 1e-9 of the sums in one run
+ * over each cluster's polygons, the same links).  With w, the
+ * subtrees `depth` levels down are left in w->roots instead, and the
+ * levels above wait for them (fill_top).  A subtree reads and writes
+ * only its own clusters, models and range of order[], so who fills it
+ * does not change the tree. */
 static void fill_cluster(rad_hier *h, uint32_t c, const double *ctr, int depth,
-                         fill_work *w)
+                         fill_work *w, fill_sums *out)
 {
 	const rad_scene *s = h->scene;
 	if (w && depth == 0) {
@@ -237,34 +288,26 @@ static void fill_cluster(rad_hier *h, uint32_t c, const double *ctr, int depth,
 		return;
 	}
 	rad_cluster *cl = rad_cluster_at(h, c);
-	int leaf = rad_cluster_is_leaf(cl);
-	for (int k = 0; leaf && k < 3; k++) {
-		cl->lo[k] = FLT_MAX;
-		cl->hi[k] = -FLT_MAX;
+	if (rad_cluster_is_leaf(cl)) {
+		for (int k = 0; k < 3; k++) {
+			cl->lo[k] = FLT_MAX;
+			cl->hi[k] = -FLT_MAX;
+		}
+		for (uint32_t i = cl->first; i < cl->first + cl->count; i++)
+			poly_bounds(s, &s->polys[h->order[i]], cl->lo, cl->hi);
+		sums_of_leaf(h, cl, out);
+		cl->area = (float)out->area;
+		return;
 	}
-	double area = 0, clo[3] = {DBL_MAX, DBL_MAX, DBL_MAX}, n[3] = {0, 0, 0};
-	double m[6] = {0, 0, 0, 0, 0, 0};
+	double clo[3] = {DBL_MAX, DBL_MAX, DBL_MAX};
 	double chi[3] = {-DBL_MAX, -DBL_MAX, -DBL_MAX};
 	for (uint32_t i = cl->first; i < cl->first + cl->count; i++) {
-		const rad_poly *p = &s->polys[h->order[i]];
-		if (leaf)
-			poly_bounds(s, p, cl->lo, cl->hi);
-		v3 an = rad_poly_an(p);
-		double a = p->area;
-		area += a;
-		n[0] += an.x;
-		n[1] += an.y;
-		n[2] += an.z;
-		moments_add(m, a, rad_poly_normal(p));
 		const double *q = ctr + 3 * (size_t)h->order[i];
 		for (int k = 0; k < 3; k++) {
 			clo[k] = q[k] < clo[k] ? q[k] : clo[k];
 			chi[k] = q[k] > chi[k] ? q[k] : chi[k];
 		}
 	}
-	cl->area = (float)area;
-	if (leaf)
-		return;
 	int axis = 0;
 	for (int k = 1; k < 3; k++)
 		if (chi[k] - clo[k] > chi[axis] - clo[axis])
@@ -273,15 +316,31 @@ static void fill_cluster(rad_hier *h, uint32_t c, const double *ctr, int depth,
 	const rad_cluster *a = rad_cluster_at(h, kids);
 	select_kth(ctr, h->order, cl->first, cl->first + cl->count,
 	           cl->first + a->count, axis);
-	rad_cluster_inner *mo = &h->inner[rad_cluster_inner_index(cl)];
-	for (int k = 0; k < 6; k++)
-		mo->m[k] = (float)m[k];
-	for (int k = 0; k < 3; k++)
-		mo->n[k] = (float)n[k];
-	double rg = sphere_mean_sqrt(m);
-	mo->q = rg > 0 ? (float)(area / (2 * rg)) : 0;
-	fill_cluster(h, kids, ctr, depth - 1, w);
-	fill_cluster(h, kids + 1, ctr, depth - 1, w);
+	fill_sums sb;
+	fill_cluster(h, kids, ctr, depth - 1, w, out);
+	fill_cluster(h, kids + 1, ctr, depth - 1, w, &sb);
+	if (!w)
+		sums_to_inner(h, cl, out, &sb);
+}
+
+/* The levels fill_cluster left to wait for the subtrees (w->sums, in the
+ * order it listed their roots, *next the first not taken). */
+static void fill_top(rad_hier *h, uint32_t c, int depth, fill_work *w,
+                     uint32_t *next, fill_sums *out)
+{
+	if (depth == 0) {
+		*out = w->sums[(*next)++];
+		return;
+	}
+	rad_cluster *cl = rad_cluster_at(h, c);
+	if (rad_cluster_is_leaf(cl)) {
+		sums_of_leaf(h, cl, out);
+		return;
+	}
+	fill_sums sb;
+	fill_top(h, cl->child, depth - 1, w, next, out);
+	fill_top(h, cl->child + 1, depth - 1, w, next, &sb);
+	sums_to_inner(h, cl, out, &sb);
 }
 
 /* Post-order: an inner cluster's bounds are the union of its children's,
@@ -308,7 +367,7 @@ static void fill_subtrees(void *ud, size_t begin, size_t end, int thread)
 	fill_work *w = ud;
 	(void)thread;
 	for (size_t i = begin; i < end; i++)
-		fill_cluster(w->h, w->roots[i], w->ctr, 0, NULL);
+		fill_cluster(w->h, w->roots[i], w->ctr, 0, NULL, &w->sums[i]);
 }
 
 /* Inner clusters of a tree over n polygons (shape_tree's rule). */
@@ -323,9 +382,10 @@ static uint32_t inner_clusters(uint32_t n)
 /* The cluster tree over every polygon, from root cluster 0 (range set):
  * its shape, then its contents, the top FILL_DEPTH levels on the calling
  * thread and the subtrees below them on par's (or NULL: the calling
- * thread's).  Each level reads every polygon: the 1M-triangle field's
- * tree took 0.90 s on one thread.  The same tree, bit for bit, for any
- * thread count.
+ * thread's).  Each level reads every polygon's centroid, and the
+ * polygons are read once, at the leaves (fill_cluster): the 1M-triangle
+ * field's setup on one thread went 0.80 -> 0.70 s with that.  The same
+ * tree, bit for bit, for any thread count.
  * The centroids every level sorts by are computed once (SCRATCH).  The
  * models: one per inner cluster, and one more, since the pool may skip
  * one record where a pair would straddle the end of its first block
@@ -352,8 +412,11 @@ static rad_status build_clusters(rad_hier *h, rad_par *par, rad_error *err)
 	rad_status st = shape_tree(h, 0, err);
 	if (!st) {
 		fill_work w = {.h = h, .ctr = ctr};
-		fill_cluster(h, 0, ctr, FILL_DEPTH, &w);
+		fill_sums top;
+		uint32_t next = 0;
+		fill_cluster(h, 0, ctr, FILL_DEPTH, &w, &top);
 		rad_par_for(par, w.nroots, 1, fill_subtrees, &w);
+		fill_top(h, 0, FILL_DEPTH, &w, &next, &top);
 		bound_inner(h, 0);
 	}
 	rad_mem_free(h->mem, RAD_MEM_SCRATCH, ctr);
