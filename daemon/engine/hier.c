@@ -551,25 +551,32 @@ rad_status rad_hier_init(rad_hier *h, const rad_scene *s, rad_mem *mem,
 	 * never in a tree.  Block 0 holds them (its size is a multiple of
 	 * 64), and every later block starts 4-aligned too. */
 	h->run0 = (n + 3) & ~3u;
-	if (!h->order || !h->root_exposed || rad_pool_add(&h->elems, n) != 0 ||
-	    (h->run0 > n && rad_pool_add(&h->elems, h->run0 - n) != n) ||
+	if (!h->order || !h->root_exposed ||
 	    rad_pool_add(&h->clusters, 1) != 0) {
 		rad_hier_destroy(h);
 		return rad_fail(err, RAD_ERR_NOMEM, "hierarchy: out of memory");
 	}
 	for (uint32_t i = 0; i < n; i++) {
-		rad_elem_at(h, i)->child = RAD_NONE;
 		h->root_exposed[i] = RAD_EXPOSED_ALL;
 		h->order[i] = i;
 	}
-	h->nleaves = n;
-	/* After the roots' edges are known (rad_hier_cover_dist). */
-	if (s->vis)
-		rad_par_for(par, n, COVER_GRAIN, measure_roots, h);
 	rad_cluster *root = rad_cluster_at(h, 0);
 	root->first = 0;
 	root->count = n;
+	/* The tree before the roots: its centroids' scratch (24 bytes a
+	 * polygon) was the 1M field's hr peak, on top of the roots. */
 	rad_status st = build_clusters(h, par, err);
+	if (!st && (rad_pool_add(&h->elems, n) != 0 ||
+	            (h->run0 > n && rad_pool_add(&h->elems, h->run0 - n) != n)))
+		st = rad_fail(err, RAD_ERR_NOMEM, "hierarchy: out of memory");
+	if (!st) {
+		for (uint32_t i = 0; i < n; i++)
+			rad_elem_at(h, i)->child = RAD_NONE;
+		h->nleaves = n;
+		/* After the roots' edges are known (rad_hier_cover_dist). */
+		if (s->vis)
+			rad_par_for(par, n, COVER_GRAIN, measure_roots, h);
+	}
 	if (!st && lists) {
 		h->inner_heads = rad_mem_alloc(mem, RAD_MEM_LINKS,
 		                               h->ninner * sizeof(uint32_t));
