@@ -564,7 +564,7 @@ rad_status rad_hier_init(rad_hier *h, const rad_scene *s, rad_mem *mem,
 	root->first = 0;
 	root->count = n;
 	/* The tree before the roots: its centroids' scratch (24 bytes a
-	 * polygon) was the 1M field's hr peak, on top of the roots. */
+	 * polygon) on top of them was the 10M field's hr peak. */
 	rad_status st = build_clusters(h, par, err);
 	if (!st && (rad_pool_add(&h->elems, n) != 0 ||
 	            (h->run0 > n && rad_pool_add(&h->elems, h->run0 - n) != n)))
