@@ -1248,7 +1248,7 @@ static void count_leaf(const rad_hier *h, uint32_t id, void *ud)
 
 /* Each cluster's box against its polygons' corners, as poly_bounds makes
  * them (hier.c: the origin plus the edges, in double, each rounded to
- * float): an inner cluster's box is its children's union (bound_inner),
+ * float): an inner cluster's box is its children's union (sums_to_inner),
  * which has to be the same floats. */
 static void check_box(const rad_hier *h, uint32_t id, void *ud)
 {
