@@ -175,10 +175,11 @@ static void walk_tree(audit_walk *w, uint32_t id)
 /* hr: the links node t receives (hr_walk_all visits every node). */
 static rad_status node_links(rad_solver *sv, void *ud, uint32_t t)
 {
-	for (uint32_t id = *rad_node_links(&sv->h, t); id != RAD_NONE;) {
-		const rad_hlink *l = rad_hlink_at(&sv->h, id);
-		visit(ud, t, l->src, rad_hlink_ff(l), id);
-		id = l->next;
+	const rad_hier *h = &sv->h;
+	for (uint32_t id = rad_hlist_live(h, *rad_node_links(h, t));
+	     id != RAD_NONE; id = rad_hlist_next(h, id)) {
+		const rad_hlink *l = rad_hlink_at(h, id);
+		visit(ud, t, rad_hlink_src(l), rad_hlink_ff(l), id);
 	}
 	return RAD_OK;
 }

@@ -485,8 +485,9 @@ static void init_pools(rad_hier *h, rad_mem *mem, uint32_t shift, uint32_t n,
 	rad_pool_init(&h->clusters, mem, RAD_MEM_ELEM_CLUSTER,
 	              sizeof(rad_cluster), shift, 0);
 	rad_pool_init(&h->links, mem, RAD_MEM_LINKS,
-	              lists ? sizeof(rad_hlink) : sizeof(rad_link),
+	              lists ? sizeof(rad_hlink_new) : sizeof(rad_link),
 	              shift < 10 ? shift + 2 : 12, 0);
+	h->pack_shift = shift < 10 ? shift + 2 : 12;
 	/* The same blocks as runs': the same ids for the same adds. */
 	rad_pool_init(&h->run_heads, mem, RAD_MEM_LINKS, sizeof(uint32_t),
 	              shift, 0);
@@ -590,6 +591,11 @@ void rad_hier_destroy(rad_hier *h)
 	h->root_exposed = NULL;
 	rad_pool_destroy(&h->clusters);
 	rad_pool_destroy(&h->links);
+	for (uint32_t b = 0; b < h->npack_blocks; b++)
+		rad_mem_free(h->mem, RAD_MEM_LINKS, h->pack[b]);
+	rad_mem_free(h->mem, RAD_MEM_LINKS, h->pack);
+	h->pack = NULL;
+	h->npack_blocks = h->pack_cap = h->npacked = h->ndead = 0;
 	rad_pool_destroy(&h->links_ext);
 	rad_pool_destroy(&h->run_heads);
 	rad_mem_free(h->mem, RAD_MEM_LINKS, h->inner_heads);
@@ -1364,14 +1370,7 @@ double rad_cluster_emit(const rad_hier *h, const rad_cluster *c,
 
 uint32_t *rad_node_links(const rad_hier *h, uint32_t tagged)
 {
-	if (tagged & RAD_TAG_CLUSTER) {
-		rad_cluster *c = rad_cluster_at(h, tagged);
-		return rad_cluster_is_leaf(c)
-		               ? &c->child
-		               : &h->inner_heads[rad_cluster_inner_index(c)];
-	}
-	rad_elem *e = rad_elem_at(h, tagged);
-	return rad_elem_is_leaf(e)
-	               ? &e->child
-	               : rad_pool_at(&h->run_heads, (e->child - h->run0) >> 2);
+	if (tagged & RAD_TAG_CLUSTER)
+		return rad_cluster_links(h, rad_cluster_at(h, tagged));
+	return rad_elem_links(h, rad_elem_at(h, tagged));
 }

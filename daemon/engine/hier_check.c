@@ -18,8 +18,10 @@
  *     polygons, but for the last leaf of the order, which may hold
  *     fewer;
  *   - links: a node's list (classic HR's rad_hlink) stays inside the
- *     pool without a loop, and each link names a source inside its
- *     pool.
+ *     pool and the packed blocks without a loop, each link names a source
+ *     inside its pool, and the packed blocks follow each other in walk
+ *     order (clusters, then quadtrees, a node before its children),
+ *     covering offsets 0 .. npacked-1 (hier.h, Packed lists).
  */
 #include <math.h>
 #include <stdio.h>
@@ -34,6 +36,7 @@ typedef struct checker {
 	char *msg;
 	size_t len;
 	uint64_t leaves;
+	uint64_t packed_end; /* end of the last packed block walked */
 } checker;
 
 static int fail(checker *c, const char *what, uint32_t id)
@@ -52,16 +55,35 @@ static int check_links(checker *c, uint32_t head, uint32_t tagged)
 {
 	const rad_hier *h = c->h;
 	uint64_t seen = 0;
-	for (uint32_t l = head; l != RAD_NONE; l = rad_hlink_at(h, l)->next) {
-		if (!(l & RAD_HLIST) || (l & ~RAD_HLIST) >= h->links.count ||
-		    ++seen > h->links.count)
+	int packed = 0;
+	for (uint32_t l = head; l != RAD_NONE; l = rad_hlist_step(h, l)) {
+		uint32_t i = l & RAD_HREF_ID;
+		if (!(l & RAD_HLIST) ||
+		    ++seen > (uint64_t)h->links.count + h->npacked)
 			return fail(c, "link list leaves the pool or loops",
 			            tagged);
+		if (!(l & RAD_HBASE) && (packed || i >= h->links.count))
+			return fail(c, "link list leaves the pool or loops",
+			            tagged);
+		if ((l & RAD_HBASE) && i >= h->npacked)
+			return fail(c, "link list leaves the packed blocks",
+			            tagged);
+		if ((l & RAD_HBASE) && !packed) {
+			if (i != c->packed_end)
+				return fail(c, "packed block out of walk order",
+				            tagged);
+			packed = 1;
+		}
+		if (l & RAD_HBASE)
+			c->packed_end = i + 1;
 		const rad_hlink *k = rad_hlink_at(h, l);
-		uint32_t src = k->src & ~RAD_TAG_MASK;
-		if ((k->src & RAD_TAG_CLUSTER) ? src >= h->clusters.count
-		    : (k->src & RAD_TAG_LIGHT) ? src >= h->scene->nlights
-		                               : src >= h->elems.count)
+		if (rad_hlink_dead(k))
+			continue;
+		uint32_t src = rad_hlink_src(k) & ~RAD_TAG_MASK;
+		uint32_t tag = rad_hlink_src(k) & RAD_TAG_MASK;
+		if (tag == RAD_TAG_CLUSTER ? src >= h->clusters.count
+		    : tag == RAD_TAG_LIGHT ? src >= h->scene->nlights
+		                           : src >= h->elems.count)
 			return fail(c, "link source outside its pool", tagged);
 	}
 	return 0;
@@ -143,10 +165,13 @@ static int check_cluster(checker *c, uint32_t id, unsigned depth)
 
 int rad_hier_check(const rad_hier *h, char *msg, size_t len)
 {
-	checker c = {h, msg, len, 0};
+	checker c = {h, msg, len, 0, 0};
 	uint32_t npolys = h->scene->npolys;
 	if (h->elems.count < npolys || h->run0 < npolys)
 		return fail(&c, "fewer elements than polygons", npolys);
+	/* Clusters first: the packed blocks' walk order. */
+	if (h->clusters.count > 0 && check_cluster(&c, 0, 0) != 0)
+		return -1;
 	for (uint32_t i = 0; i < npolys; i++) {
 		if (check_elem(&c, i) != 0)
 			return -1;
@@ -154,7 +179,8 @@ int rad_hier_check(const rad_hier *h, char *msg, size_t len)
 	if (c.leaves != h->nleaves)
 		return fail(&c, "leaf count differs from nleaves",
 		            (uint32_t)c.leaves);
-	if (h->clusters.count > 0 && check_cluster(&c, 0, 0) != 0)
-		return -1;
+	if (c.packed_end != h->npacked)
+		return fail(&c, "packed blocks not all on lists",
+		            (uint32_t)c.packed_end);
 	return 0;
 }

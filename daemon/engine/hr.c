@@ -79,18 +79,19 @@ static void node_payload(const gather_job *g, uint32_t rcv,
 {
 	const rad_hier *h = g->h;
 	double lit[3] = {0, 0, 0}, rows = 0;
-	for (uint32_t id = *rad_node_links(h, rcv); id != RAD_NONE;) {
+	for (uint32_t id = rad_hlist_live(h, *rad_node_links(h, rcv));
+	     id != RAD_NONE; id = rad_hlist_next(h, id)) {
 		const rad_hlink *l = rad_hlink_at(h, id);
-		if (node_is_light(l->src)) {
+		uint32_t src = rad_hlink_src(l);
+		if (node_is_light(src)) {
 			double b[3];
-			double f = rad_hlink_ff(l) *
-			           node_sends(h, rcv, l->src, 0, b);
+			double f =
+			        rad_hlink_ff(l) * node_sends(h, rcv, src, 0, b);
 			for (int c = 0; c < 3; c++)
 				lit[c] += f * b[c];
 		} else {
 			rows += rad_hlink_ff(l) * g->k[1];
 		}
-		id = l->next;
 	}
 	x[0] = (float)rows;
 	for (int c = 0; c < 3; c++)
@@ -106,12 +107,14 @@ static void gather_list(gather_job *g, uint32_t rcv, uint32_t head, float I[3],
 {
 	rad_hier *h = g->h;
 	double lit[3] = {0, 0, 0}, surf[3] = {0, 0, 0}, fsum = 0;
-	for (uint32_t id = head; id != RAD_NONE;) {
+	for (uint32_t id = rad_hlist_live(h, head); id != RAD_NONE;
+	     id = rad_hlist_next(h, id)) {
 		const rad_hlink *l = rad_hlink_at(h, id);
-		int light = node_is_light(l->src);
+		uint32_t src = rad_hlink_src(l);
+		int light = node_is_light(src);
 		double b[3];
 		double ff = rad_hlink_ff(l);
-		double fb = ff * node_sends(h, rcv, l->src, 0, b);
+		double fb = ff * node_sends(h, rcv, src, 0, b);
 		double *acc = light ? lit : surf;
 		for (int c = 0; c < 3; c++)
 			acc[c] += fb * b[c];
@@ -120,12 +123,11 @@ static void gather_list(gather_job *g, uint32_t rcv, uint32_t head, float I[3],
 		if (!light)
 			fsum += ff;
 		if (f)
-			node_took(h, f, rcv, l->src,
+			node_took(h, f, rcv, src,
 			          ks * fb *
 			                  (RAD_LUMA_R * b[0] +
 			                   RAD_LUMA_G * b[1] +
 			                   RAD_LUMA_B * b[2]));
-		id = l->next;
 	}
 	double a = node_area(h, rcv);
 	const rad_material *m =
@@ -413,9 +415,9 @@ static void tally_walk(rad_solver *sv, hr_node_fn fn)
 static rad_status count_node(rad_solver *sv, void *ud, uint32_t t)
 {
 	const rad_hier *h = &sv->h;
-	for (uint32_t id = *rad_node_links(&sv->h, t); id != RAD_NONE;
-	     id = rad_hlink_at(h, id)->next)
-		node_count_link(ud, t, rad_hlink_at(h, id)->src);
+	for (uint32_t id = rad_hlist_live(h, *rad_node_links(h, t));
+	     id != RAD_NONE; id = rad_hlist_next(h, id))
+		node_count_link(ud, t, rad_hlink_src(rad_hlink_at(h, id)));
 	return RAD_OK;
 }
 
@@ -429,12 +431,13 @@ static rad_status study_node(rad_solver *sv, void *ud, uint32_t t)
 	const rad_hier *h = &sv->h;
 	int first = sv->stats.iteration == 0;
 	const double *dluma = ((const hr_state *)sv->impl)->dluma;
-	for (uint32_t id = *rad_node_links(&sv->h, t); id != RAD_NONE;
-	     id = rad_hlink_at(h, id)->next) {
+	for (uint32_t id = rad_hlist_live(h, *rad_node_links(h, t));
+	     id != RAD_NONE; id = rad_hlist_next(h, id)) {
 		const rad_hlink *l = rad_hlink_at(h, id);
+		uint32_t src = rad_hlink_src(l);
 		double b, inc;
-		if (node_is_cluster(l->src)) {
-			const rad_cluster *c = rad_cluster_at(h, l->src);
+		if (node_is_cluster(src)) {
+			const rad_cluster *c = rad_cluster_at(h, src);
 			float d[3];
 			b = inc = rad_luma(c->B);
 			if (!first && !rad_cluster_is_leaf(c)) {
@@ -444,16 +447,16 @@ static rad_status study_node(rad_solver *sv, void *ud, uint32_t t)
 				inc = fabs(rad_luma(d));
 			}
 		} else {
-			b = inc = node_luma_B(h, l->src);
-			if (!first && node_is_light(l->src)) {
+			b = inc = node_luma_B(h, src);
+			if (!first && node_is_light(src)) {
 				inc = 0;
 			} else if (!first) {
 				float d[3];
-				rad_elem_dB(h, rad_elem_at(h, l->src), d);
+				rad_elem_dB(h, rad_elem_at(h, src), d);
 				inc = fabs(rad_luma(d));
 			}
 		}
-		node_stat_exchange(sv, ud, t, l->src, rad_hlink_ff(l), b, inc);
+		node_stat_exchange(sv, ud, t, src, rad_hlink_ff(l), b, inc);
 	}
 	return RAD_OK;
 }
@@ -514,7 +517,7 @@ static rad_status hr_init(rad_solver *sv, rad_error *err)
 		}
 		return rad_fail(err, RAD_ERR_NOMEM, "hr: out of memory");
 	}
-	st->wave.link_cost = sizeof(rad_hlink);
+	st->wave.link_cost = sizeof(rad_hlink_new);
 	/* Under a budget a batch is kept to a 64th of it: the room kept
 	 * for a batch's children is room the links cannot have, and a batch
 	 * of 2^15 pairs (384 KiB) was a fifth of a 2 MiB budget.  Measured
@@ -593,6 +596,7 @@ static rad_status hr_step(rad_solver *sv, rad_error *err)
 		                st->wave.parents.n - st->wave.parents_next +
 		                        st->wave.held.n);
 	release_scratch(sv, st);
+	hr_pack_lists(sv, 1);
 	if (rs == RAD_ERR_CANCELLED)
 		return rad_fail(
 		        err, rs,

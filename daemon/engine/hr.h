@@ -62,6 +62,16 @@ rad_status hr_retest_links(rad_solver *sv, hr_state *st);
 rad_status hr_refine_pending(rad_solver *sv, hr_state *st);
 /* 1 if a cancelled refinement left pairs to judge or split. */
 int hr_refine_left(const hr_state *st);
+/*
+ * Pack the lists (hier.h, Packed lists): once a step's refinement is
+ * over and its scratch released (done: if any link is new or dead), or
+ * while it makes links, once those made since the last packing pass a
+ * quarter of those packed (and 2^16).  A packing walks every node, twice
+ * where it drops the dead links: when done, or once they are an eighth
+ * of those packed.  One refused (the budget) leaves the lists as they
+ * are, and the next one tries again.
+ */
+void hr_pack_lists(rad_solver *sv, int done);
 
 /* Pre-order walk over the live nodes (see hier.h on liveness): clusters,
  * then every polygon's quadtree; stops at the first failure. */

@@ -104,17 +104,10 @@ static uint8_t judge(rad_solver *sv, const void *item, int may_split,
 static rad_status store_link(rad_solver *sv, uint32_t r, uint32_t s, float ff,
                              float spread)
 {
-	uint32_t id = rad_pool_add(&sv->h.links, 1);
-	if (id == RAD_NONE)
-		return RAD_ERR_NOMEM;
-	uint32_t *head = rad_node_links(&sv->h, r);
-	rad_hlink *l = rad_hlink_at(&sv->h, id);
-	l->src = s;
-	rad_hlink_set(l, ff, spread);
-	l->next = *head;
-	*head = rad_hlist_ref(id);
-	sv->stats.links_created++;
-	return RAD_OK;
+	rad_status rs = rad_hlist_add(&sv->h, r, s, ff, spread);
+	if (!rs)
+		sv->stats.links_created++;
+	return rs;
 }
 
 /* Hold pair r <- s to be split after the wave (expand_splits); under a
@@ -233,6 +226,19 @@ static rad_status expand_batch(rad_solver *sv, hr_state *st)
 	return RAD_OK;
 }
 
+#define PACK_FLOOR (1u << 16)
+void hr_pack_lists(rad_solver *sv, int done)
+{
+	rad_hier *h = &sv->h;
+	uint32_t fresh = rad_pool_live(&h->links);
+	uint32_t live = h->npacked - h->ndead;
+	int drop = done || h->ndead > live / 8;
+	if (done ? fresh || h->ndead
+	         : (fresh > PACK_FLOOR && fresh > live / 4) ||
+	                    (h->ndead > PACK_FLOOR && drop))
+		(void)rad_hlist_pack(h, drop);
+}
+
 int hr_refine_left(const hr_state *st)
 {
 	const rad_wave *w = &st->wave;
@@ -257,6 +263,7 @@ static rad_status refine_waves(rad_solver *sv, hr_state *st)
 			wave_count_rays(sv, w); /* what the attempt cost */
 			return RAD_ERR_CANCELLED;
 		}
+		hr_pack_lists(sv, 0);
 		if (w->todo.n == 0) {
 			if (w->parents_next == w->parents.n) {
 				if (w->held.n == 0)
@@ -333,18 +340,16 @@ rad_status hr_initial_links(rad_solver *sv, hr_state *st)
 	return rs;
 }
 
-/* Unlink the link of receiver r that *prev points to, queue its pair for
- * splitting. */
+/* Take receiver r's link *ref off its list (*prev: the reference to it,
+ * if new), queue its pair for splitting; *ref becomes the next live one. */
 static rad_status requeue(rad_solver *sv, hr_state *st, uint32_t r,
-                          uint32_t *prev, int rcv_only)
+                          uint32_t *prev, uint32_t *ref, int rcv_only)
 {
-	uint32_t ref = *prev;
-	rad_hlink *l = rad_hlink_at(&sv->h, ref);
-	rad_status rs = hold_pair(sv, st, r, l->src, rcv_only);
+	rad_hlink *l = rad_hlink_at(&sv->h, *ref);
+	rad_status rs = hold_pair(sv, st, r, rad_hlink_src(l), rcv_only);
 	if (rs)
 		return rs;
-	*prev = l->next;
-	rad_pool_release(&sv->h.links, ref & ~RAD_HLIST);
+	*ref = rad_hlist_remove(&sv->h, prev, *ref);
 	sv->stats.links_deleted++;
 	return RAD_OK;
 }
@@ -357,7 +362,7 @@ static rad_status requeue(rad_solver *sv, hr_state *st, uint32_t r,
  */
 static double link_error(const rad_hier *h, const rad_hlink *l)
 {
-	return 0.5 * node_luma_B(h, l->src) * rad_hlink_spread(l);
+	return 0.5 * node_luma_B(h, rad_hlink_src(l)) * rad_hlink_spread(l);
 }
 
 static int cmp_desc(const void *a, const void *b)
@@ -368,14 +373,15 @@ static int cmp_desc(const void *a, const void *b)
 
 /*
  * Smallest variation v such that dropping every link of at least v leaves
- * at most `budget` in the list.  Uses st->vals as scratch.
+ * at most `budget` in the list from live reference head on.  Uses
+ * st->vals as scratch.
  */
 static rad_status budget_cut(rad_solver *sv, hr_state *st, uint32_t head,
                              double total, double budget, double *cut)
 {
 	const rad_hier *h = &sv->h;
 	size_t n = 0;
-	for (uint32_t id = head; id != RAD_NONE; id = rad_hlink_at(h, id)->next)
+	for (uint32_t id = head; id != RAD_NONE; id = rad_hlist_next(h, id))
 		n++;
 	if (n > st->vals_cap) {
 		double *v = rad_mem_realloc(&sv->mem, RAD_MEM_SCRATCH, st->vals,
@@ -386,7 +392,7 @@ static rad_status budget_cut(rad_solver *sv, hr_state *st, uint32_t head,
 		st->vals_cap = n;
 	}
 	n = 0;
-	for (uint32_t id = head; id != RAD_NONE; id = rad_hlink_at(h, id)->next)
+	for (uint32_t id = head; id != RAD_NONE; id = rad_hlist_next(h, id))
 		st->vals[n++] = link_error(h, rad_hlink_at(h, id));
 	qsort(st->vals, n, sizeof(double), cmp_desc);
 	*cut = 0;
@@ -411,37 +417,47 @@ static rad_status retest_list(rad_solver *sv, hr_state *st, uint32_t r,
 	rad_hier *h = &sv->h;
 	uint32_t *head = rad_node_links(h, r);
 	double total = 0;
-	for (uint32_t *prev = head; *prev != RAD_NONE;) {
-		rad_hlink *l = rad_hlink_at(h, *prev);
+	/* prev: the reference to id while id is new (Packed lists). */
+	uint32_t *prev = head;
+	for (uint32_t id = rad_hlist_live(h, *head); id != RAD_NONE;) {
+		rad_hlink *l = rad_hlink_at(h, id);
+		uint32_t src = rad_hlink_src(l);
 		/* A zero link (cluster pair whose samples saw nothing) is
 		 * judged on its bound: its sources may have lit up. */
 		double f = rad_hlink_ff(l);
 		if (!(f > 0))
-			f = node_ff_bound(h, r, l->src);
-		if (wave_refinable(h, r, l->src) &&
-		    oracle(sv, r, l->src, f) > sv->opt.eps &&
-		    room_to_split(sv, st, r, l->src, 0)) {
-			rad_status rs = requeue(sv, st, r, prev, 0);
+			f = node_ff_bound(h, r, src);
+		if (wave_refinable(h, r, src) &&
+		    oracle(sv, r, src, f) > sv->opt.eps &&
+		    room_to_split(sv, st, r, src, 0)) {
+			rad_status rs = requeue(sv, st, r, prev, &id, 0);
 			if (rs)
 				return rs;
 			continue;
 		}
 		total += link_error(h, l);
-		prev = &l->next;
+		if (!(id & RAD_HBASE))
+			prev = &rad_hlink_new_at(h, id)->next;
+		id = rad_hlist_next(h, id);
 	}
 	*kept = total;
-	if (total <= budget || *head == RAD_NONE || !node_splittable(h, r))
+	uint32_t first = rad_hlist_live(h, *head);
+	if (total <= budget || first == RAD_NONE || !node_splittable(h, r))
 		return RAD_OK;
 	double cut;
-	rad_status rs = budget_cut(sv, st, *head, total, budget, &cut);
-	for (uint32_t *prev = head; !rs && *prev != RAD_NONE;) {
-		rad_hlink *l = rad_hlink_at(h, *prev);
+	rad_status rs = budget_cut(sv, st, first, total, budget, &cut);
+	prev = head;
+	for (uint32_t id = first; !rs && id != RAD_NONE;) {
+		rad_hlink *l = rad_hlink_at(h, id);
 		double v = link_error(h, l);
-		if (v >= cut && v > 0 && room_to_split(sv, st, r, l->src, 1)) {
+		if (v >= cut && v > 0 &&
+		    room_to_split(sv, st, r, rad_hlink_src(l), 1)) {
 			total -= v;
-			rs = requeue(sv, st, r, prev, 1);
+			rs = requeue(sv, st, r, prev, &id, 1);
 		} else {
-			prev = &l->next;
+			if (!(id & RAD_HBASE))
+				prev = &rad_hlink_new_at(h, id)->next;
+			id = rad_hlist_next(h, id);
 		}
 	}
 	*kept = total;

@@ -471,21 +471,27 @@ int wave_room_split(const rad_solver *sv, const rad_wave *w, uint32_t r,
 	return room_with(sv, w, 1, 0, b, kids);
 }
 
+/* The links held, packed ones included (hr: hier.h, Packed lists). */
+static uint32_t wave_links(const rad_hier *h)
+{
+	return h->lists ? rad_hlist_count(h) : rad_pool_live(&h->links);
+}
+
 rad_status wave_failed(const rad_solver *sv, rad_status rs, rad_error *err)
 {
 	if (sv->mem.budget && atomic_load(&sv->mem.budget_refusals))
-		return rad_fail(
-		        err, rs,
-		        "%s: the memory budget (%g MiB) is too small "
-		        "for this scene's coarsest links (%u elements, "
-		        "%u links held)",
-		        sv->ops->name, (double)sv->mem.budget / 1048576.0,
-		        rad_hier_elements(&sv->h), rad_pool_live(&sv->h.links));
+		return rad_fail(err, rs,
+		                "%s: the memory budget (%g MiB) is too small "
+		                "for this scene's coarsest links (%u elements, "
+		                "%u links held)",
+		                sv->ops->name,
+		                (double)sv->mem.budget / 1048576.0,
+		                rad_hier_elements(&sv->h), wave_links(&sv->h));
 	return rad_fail(err, rs,
 	                "%s: refinement ran out of memory (%u elements, %u "
 	                "links)",
 	                sv->ops->name, rad_hier_elements(&sv->h),
-	                rad_pool_live(&sv->h.links));
+	                wave_links(&sv->h));
 }
 
 rad_status wave_step_end(rad_solver *sv, rad_wave *w, rad_error *err)

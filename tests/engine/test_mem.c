@@ -554,6 +554,150 @@ static void check_leaf_lists(rad_hier *h)
 	assert_int_equal(rad_hier_check(h, msg, sizeof(msg)), 0);
 }
 
+/* Every node in walk order (clusters, then each quadtree; a node before
+ * its children), into v (at most cap). */
+static size_t walk_nodes(const rad_hier *h, uint32_t t, uint32_t *v, size_t n,
+                         size_t cap)
+{
+	assert_true(n < cap);
+	v[n++] = t;
+	if (t & RAD_TAG_CLUSTER) {
+		const rad_cluster *c = rad_cluster_at(h, t);
+		for (uint32_t k = 0; k < 2 && !rad_cluster_is_leaf(c); k++)
+			n = walk_nodes(h, (c->child + k) | RAD_TAG_CLUSTER, v,
+			               n, cap);
+	} else {
+		const rad_elem *e = rad_elem_at(h, t);
+		for (uint32_t k = 0; k < 4 && !rad_elem_is_leaf(e); k++)
+			n = walk_nodes(h, e->child + k, v, n, cap);
+	}
+	return n;
+}
+
+/* Node t's live links as (source, ff and spread) pairs, in list order. */
+static size_t list_of(const rad_hier *h, uint32_t t, uint64_t *out)
+{
+	size_t n = 0;
+	for (uint32_t id = rad_hlist_live(h, *rad_node_links(h, t));
+	     id != RAD_NONE; id = rad_hlist_next(h, id)) {
+		const rad_hlink *l = rad_hlink_at(h, id);
+		out[n++] = (uint64_t)rad_hlink_src(l) << 32 | l->fs;
+	}
+	return n;
+}
+
+/*
+ * Packing (hier.h, Packed lists) keeps every list's links and their
+ * order: links taken off packed blocks and new ones put in front of
+ * them read the same before and after, the new links' pool is emptied,
+ * and the blocks stay in walk order (rad_hier_check).
+ */
+static void test_hlist_pack_keeps_lists(void **state)
+{
+	(void)state;
+	rad_scene *s = make_room();
+	rad_options o;
+	rad_options_default(&o);
+	o.solver = RAD_SOLVER_HR;
+	rad_solver *sv = NULL;
+	rad_error err;
+	char msg[256];
+	assert_int_equal(rad_solver_new(s, &o, &sv, &err), RAD_OK);
+	assert_int_equal(rad_solver_step(sv, &err), RAD_OK);
+	rad_hier *h = &sv->h;
+	/* A step ends packed. */
+	assert_int_equal(rad_pool_live(&h->links), 0);
+	assert_int_equal(h->ndead, 0);
+	uint32_t links = rad_hlist_count(h);
+	assert_true(links > 100 && links == h->npacked);
+	size_t cap = (size_t)rad_hier_elements(h) + h->clusters.count;
+	uint32_t *nodes = malloc(cap * sizeof(*nodes));
+	assert_non_null(nodes);
+	size_t nn = walk_nodes(h, RAD_TAG_CLUSTER, nodes, 0, cap);
+	for (uint32_t i = 0; i < s->npolys; i++)
+		nn = walk_nodes(h, i, nodes, nn, cap);
+	/* Expected lists: every third link taken off, and on every fifth
+	 * node two new ones in front (the newer first). */
+	uint64_t *want = malloc((size_t)(links + 2 * nn) * sizeof(*want));
+	size_t *at = malloc((nn + 1) * sizeof(*at));
+	assert_true(want && at);
+	size_t w = 0, seen = 0, removed = 0, added = 0;
+	for (size_t k = 0; k < nn; k++) {
+		uint32_t t = nodes[k];
+		at[k] = w;
+		if (k % 5 == 0) {
+			for (uint32_t j = 2; j-- > 0;) {
+				rad_hlink x;
+				rad_hlink_set(&x, 0.01f * (float)(j + 1), 0.5f);
+				want[w++] =
+				        (uint64_t)(k % s->npolys) << 32 | x.fs;
+			}
+		}
+		uint32_t *prev = rad_node_links(h, t);
+		for (uint32_t id = rad_hlist_live(h, *prev); id != RAD_NONE;) {
+			const rad_hlink *l = rad_hlink_at(h, id);
+			if (seen++ % 3 == 0) {
+				id = rad_hlist_remove(h, prev, id);
+				removed++;
+				continue;
+			}
+			want[w++] = (uint64_t)rad_hlink_src(l) << 32 | l->fs;
+			id = rad_hlist_next(h, id);
+		}
+		if (k % 5 == 0) {
+			for (uint32_t j = 0; j < 2; j++)
+				assert_int_equal(
+				        rad_hlist_add(
+				                h, t, (uint32_t)(k % s->npolys),
+				                0.01f * (float)(j + 1), 0.5f),
+				        RAD_OK);
+			added += 2;
+		}
+	}
+	at[nn] = w;
+	assert_int_equal(h->ndead, removed);
+	assert_int_equal(rad_hlist_count(h), links - removed + added);
+	assert_int_equal(rad_hier_check(h, msg, sizeof(msg)), 0);
+	uint64_t *got = malloc((size_t)(links + 2 * nn) * sizeof(*got));
+	assert_non_null(got);
+	for (int pass = 0; pass < 3; pass++) {
+		/* Before packing, after packing the new links (the dead
+		 * ones kept), after dropping the dead ones too. */
+		for (size_t k = 0; k < nn; k++) {
+			size_t n = list_of(h, nodes[k], got);
+			assert_int_equal(n, at[k + 1] - at[k]);
+			assert_memory_equal(got, want + at[k],
+			                    n * sizeof(*got));
+		}
+		assert_int_equal(rad_hier_check(h, msg, sizeof(msg)), 0);
+		if (pass == 1) {
+			assert_int_equal(rad_pool_live(&h->links), 0);
+			assert_int_equal(h->ndead, removed);
+			assert_int_equal(h->npacked, links + added);
+		}
+		if (pass < 2)
+			assert_int_equal(rad_hlist_pack(h, pass), RAD_OK);
+	}
+	assert_int_equal(rad_pool_live(&h->links), 0);
+	assert_int_equal(h->ndead, 0);
+	assert_int_equal(h->npacked, links - removed + added);
+	assert_int_equal(rad_hier_check(h, msg, sizeof(msg)), 0);
+	/* Out of walk order is found. */
+	uint32_t *head = rad_node_links(h, nodes[0]);
+	uint32_t keep = *head;
+	*head = RAD_NONE;
+	assert_int_equal(rad_hier_check(h, msg, sizeof(msg)), -1);
+	*head = keep;
+	/* And the solve goes on from the packed lists. */
+	assert_int_equal(rad_hier_check(h, msg, sizeof(msg)), 0);
+	free(got);
+	free(want);
+	free(at);
+	free(nodes);
+	rad_solver_free(sv);
+	rad_scene_free(s);
+}
+
 static void test_hier_invariants(void **state)
 {
 	(void)state;
@@ -592,12 +736,13 @@ static void test_hier_invariants(void **state)
 			        rad_hlink_at(h, *rad_node_links(h, linked));
 			expect_planted(h, &ch->poly, "disowns its parent");
 			expect_planted(h, &h->nleaves, "nleaves");
-			uint32_t src = l->src;
-			l->src = rad_pool_capacity(&h->elems);
+			uint32_t src = l->srcl;
+			l->srcl = rad_pool_capacity(&h->elems) |
+			          (src & RAD_HLINK_LAST);
 			assert_int_equal(rad_hier_check(h, msg, sizeof(msg)),
 			                 -1);
 			assert_non_null(strstr(msg, "outside its pool"));
-			l->src = src;
+			l->srcl = src;
 			assert_int_equal(rad_hier_check(h, msg, sizeof(msg)),
 			                 0);
 			check_leaf_lists(h);
@@ -1681,6 +1826,7 @@ int main(void)
 	        cmocka_unit_test(test_scene_and_solver_return_to_zero),
 	        cmocka_unit_test(test_solver_alloc_failure_is_clean),
 	        cmocka_unit_test(test_hier_invariants),
+	        cmocka_unit_test(test_hlist_pack_keeps_lists),
 	        cmocka_unit_test(test_elem_regions_derived),
 	        cmocka_unit_test(test_link_records),
 	        cmocka_unit_test(test_limit_refuses_cleanly),
