@@ -66,10 +66,13 @@ int hr_refine_left(const hr_state *st);
  * Pack the lists (hier.h, Packed lists): once a step's refinement is
  * over and its scratch released (done: if any link is new or dead), or
  * while it makes links, once those made since the last packing pass a
- * quarter of those packed (and 2^16).  A packing walks every node, twice
- * where it drops the dead links: when done, or once they are an eighth
- * of those packed.  One refused (the budget) leaves the lists as they
- * are, and the next one tries again.
+ * quarter of those packed and an eighth of the nodes (at least 2^16).
+ * A packing walks every node, twice where it drops the dead links: when
+ * done, or once they are an eighth of those packed.  One refused (the
+ * budget) leaves the lists as they are, and the next one tries again.
+ * The eighth of the nodes spares the large scenes' first steps walks
+ * without moving the peaks (grand hall 51.6 MB, 1M field 141.0: hr, 4
+ * iterations, 2 threads).
  */
 void hr_pack_lists(rad_solver *sv, int done);
 

@@ -232,10 +232,12 @@ void hr_pack_lists(rad_solver *sv, int done)
 	rad_hier *h = &sv->h;
 	uint32_t fresh = rad_pool_live(&h->links);
 	uint32_t live = h->npacked - h->ndead;
+	uint32_t floor = (rad_hier_elements(h) + h->clusters.count) / 8;
+	floor = floor > PACK_FLOOR ? floor : PACK_FLOOR;
 	int drop = done || h->ndead > live / 8;
 	if (done ? fresh || h->ndead
-	         : (fresh > PACK_FLOOR && fresh > live / 4) ||
-	                    (h->ndead > PACK_FLOOR && drop))
+	         : (fresh > floor && fresh > live / 4) ||
+	                    (h->ndead > floor && drop))
 		(void)rad_hlist_pack(h, drop);
 }
 
