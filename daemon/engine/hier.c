@@ -487,7 +487,6 @@ static void init_pools(rad_hier *h, rad_mem *mem, uint32_t shift, uint32_t n,
 	rad_pool_init(&h->links, mem, RAD_MEM_LINKS,
 	              lists ? sizeof(rad_hlink_new) : sizeof(rad_link),
 	              shift < 10 ? shift + 2 : 12, 0);
-	h->pack_shift = shift < 10 ? shift + 2 : 12;
 	/* The same blocks as runs': the same ids for the same adds. */
 	rad_pool_init(&h->run_heads, mem, RAD_MEM_LINKS, sizeof(uint32_t),
 	              shift, 0);

@@ -450,10 +450,11 @@ typedef struct rad_hier {
 	int exact_dB; /* elements keep dB in floats (Increments) */
 	rad_pool run_heads;
 	uint32_t *inner_heads;
-	/* hr: the packed links, offsets 0 .. npacked-1 in blocks of
-	 * 1 << pack_shift (Packed lists), LINKS; ndead of them dead. */
+	/* hr: the packed links, offsets 0 .. npacked-1 in blocks of as
+	 * many as the links pool's (1 << links.shift; Packed lists),
+	 * LINKS; ndead of them dead. */
 	rad_hlink **pack;
-	uint32_t npack_blocks, pack_cap, pack_shift;
+	uint32_t npack_blocks, pack_cap;
 	uint32_t npacked, ndead;
 	uint32_t *order; /* polygon ids in cluster order, ELEM_CLUSTER */
 	rad_cluster_inner *inner;   /* inner clusters' records, ELEM_CLUSTER */
@@ -550,8 +551,8 @@ static inline rad_link *rad_link_at(const rad_hier *h, uint32_t id)
  * a reference on; RAD_NONE ends a list. */
 static inline rad_hlink *rad_hlink_packed(const rad_hier *h, uint32_t off)
 {
-	return h->pack[off >> h->pack_shift] +
-	       (off & ((1u << h->pack_shift) - 1u));
+	return h->pack[off >> h->links.shift] +
+	       (off & ((1u << h->links.shift) - 1u));
 }
 static inline rad_hlink_new *rad_hlink_new_at(const rad_hier *h, uint32_t ref)
 {

@@ -8,7 +8,7 @@
  * children -- so a list's packed block always lies after those of the
  * nodes walked before it.  It takes two walks:
  *   1. forward: every packed block moves down over the dead links before
- *      it (never up, so in place), and the new links are counted;
+ *      it (never up, so in place);
  *   2. backward: each list, from the last node walked to the first,
  *      moves up by the new links of the nodes before it (again in place,
  *      since the blocks of the nodes before it lie below where it was),
@@ -25,7 +25,7 @@
 
 static uint32_t block_links(const rad_hier *h)
 {
-	return 1u << h->pack_shift;
+	return 1u << h->links.shift;
 }
 
 rad_status rad_hlist_add(rad_hier *h, uint32_t tagged, uint32_t src, float ff,
@@ -72,7 +72,6 @@ uint32_t rad_hlist_count(const rad_hier *h)
 typedef struct pack_walk {
 	rad_hier *h;
 	uint32_t at;     /* 1: the packed links kept so far */
-	uint64_t fresh;  /* 1: new links counted so far */
 	uint32_t end;    /* 2: where the packed block of the node after
 	                    the current one (in walk order) starts */
 	uint64_t before; /* 2: new links of the nodes before the current */
@@ -98,7 +97,6 @@ static void pack_down(pack_walk *w, uint32_t *head)
 	rad_hier *h = w->h;
 	uint32_t n;
 	uint32_t *ref = chain_end(h, head, &n);
-	w->fresh += n;
 	if (*ref == RAD_NONE)
 		return;
 	uint32_t start = w->at;
@@ -226,6 +224,7 @@ rad_status rad_hlist_pack(rad_hier *h, int drop_dead)
 	uint32_t n = h->scene->npolys;
 	pack_walk w = {.h = h};
 	int clusters = h->clusters.count > 0;
+	uint32_t fresh = rad_pool_live(&h->links); /* all on the chains */
 	if (h->ndead && drop_dead) {
 		if (clusters)
 			down_cluster(&w, 0);
@@ -233,17 +232,14 @@ rad_status rad_hlist_pack(rad_hier *h, int drop_dead)
 			down_elem(&w, i);
 		h->npacked = w.at;
 		h->ndead = 0;
-	} else {
-		w.at = h->npacked;
-		w.fresh = rad_pool_live(&h->links);
 	}
-	uint64_t total = (uint64_t)w.at + w.fresh;
-	if (w.fresh == 0 || total > RAD_HREF_ID || !pack_reserve(h, total)) {
+	uint64_t total = (uint64_t)h->npacked + fresh;
+	if (fresh == 0 || total > RAD_HREF_ID || !pack_reserve(h, total)) {
 		pack_reserve(h, h->npacked); /* gives back what it can */
-		return w.fresh ? RAD_ERR_NOMEM : RAD_OK;
+		return fresh ? RAD_ERR_NOMEM : RAD_OK;
 	}
-	w.end = w.at;
-	w.before = w.fresh;
+	w.end = h->npacked;
+	w.before = fresh;
 	for (uint32_t i = n; i-- > 0;)
 		up_elem(&w, i);
 	if (clusters)
