@@ -265,29 +265,19 @@ static void count_links(rad_solver *sv)
 
 /* ------------------------------------------------------------- solver */
 
-/* Bytes a per-element array of capacity cap still grows by to cover
- * every element there is (rmb_refine.c: cover), allocator's rounding
- * included. */
-static size_t array_growth(const rad_hier *h, size_t cap)
-{
-	size_t n = (size_t)h->elems.count + ((size_t)1 << h->elems.shift);
-	return n > cap ? (n - cap) * sizeof(float) + 4096 : 0;
-}
-
-/* Under a budget, room for what the per-element arrays the walk grows
- * (err and emax, made again by every walk, and cut) still take, each
- * as long as the elements and a block (w->elem_extra for each element
- * a split will make), and for the link bits (fresh, dead) to double
- * once.  Counted from the capacity they have, so that what they hold,
- * which the budget's work includes, is not counted again (the whole
- * arrays twice over, counted at each step's start, kept the Graz office
- * at 12.2 of 12.4 MiB where 10.6 of it was what it used). */
+/* Under a budget, room for the receiver-accuracy maps (err, made again
+ * by every walk, and cut) to grow once each (and a slot for each element
+ * a split will make, w->elem_extra; a growth the budget refuses past
+ * that only leaves receivers uncut: rmb_refine.c, track_err), and for
+ * the link bits (fresh, dead) to double once.  Counted from the
+ * capacity they have, so that what they hold, which the budget's work
+ * includes, is not counted again (arrays by element id counted whole at
+ * each step's start kept the Graz office at 12.2 of 12.4 MiB where 10.6
+ * of it was what it used). */
 static size_t step_reserve(const rad_solver *sv)
 {
 	const rmb_state *st = sv->impl;
-	const rad_hier *h = &sv->h;
-	return array_growth(h, st->cap_err) + array_growth(h, st->cap_emax) +
-	       array_growth(h, st->cap_cut) +
+	return rmb_acc_growth(sv, &st->err) + rmb_acc_growth(sv, &st->cut) +
 	       4 * st->cap_bits * sizeof(uint64_t);
 }
 
@@ -299,7 +289,11 @@ static rad_status rmb_init(rad_solver *sv, rad_error *err)
 		return rad_fail(err, RAD_ERR_NOMEM, "rmb: out of memory");
 	sv->impl = st;
 	rad_status rs = wave_init(sv, &st->wave, sizeof(rmb_item));
-	st->wave.elem_extra = 3 * sizeof(float);
+	st->wave.elem_extra = 3 * sizeof(float); /* err's 2 and cut's 1 */
+	st->err.nv = 2;
+	st->err.kind = RAD_MEM_SCRATCH;
+	st->cut.nv = 1;
+	st->cut.kind = RAD_MEM_ELEM_SURFACE;
 	st->ncl = sv->h.clusters.count;
 	st->black = rad_mem_calloc(&sv->mem, RAD_MEM_ELEM_CLUSTER, st->ncl, 1);
 	st->arefl = rad_mem_calloc(&sv->mem, RAD_MEM_ELEM_CLUSTER, st->ncl,
@@ -332,10 +326,7 @@ static rad_status rmb_init(rad_solver *sv, rad_error *err)
 static void release_scratch(rad_solver *sv, rmb_state *st)
 {
 	wave_release(sv, &st->wave);
-	rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, st->err);
-	rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, st->emax);
-	st->err = st->emax = NULL;
-	st->cap_err = st->cap_emax = 0;
+	rmb_acc_free(sv, &st->err);
 }
 
 static rad_status rmb_step(rad_solver *sv, rad_error *err)
@@ -353,7 +344,7 @@ static rad_status rmb_step(rad_solver *sv, rad_error *err)
 	}
 	rad_status rs = rmb_refine_gather(sv, st);
 	if (rs == RAD_ERR_CANCELLED) {
-		wave_release(sv, &st->wave); /* err, emax go on */
+		wave_release(sv, &st->wave); /* err goes on */
 		wave_step_end(sv, &st->wave, err);
 		return rad_fail(err, rs,
 		                "rmb: cancelled while linking every pair of "
@@ -405,7 +396,7 @@ static void rmb_destroy(rad_solver *sv)
 	rad_mem_free(&sv->mem, RAD_MEM_ELEM_CLUSTER, st->black);
 	rad_mem_free(&sv->mem, RAD_MEM_ELEM_CLUSTER, st->arefl);
 	rad_mem_free(&sv->mem, RAD_MEM_ELEM_CLUSTER, st->rhomax);
-	rad_mem_free(&sv->mem, RAD_MEM_ELEM_SURFACE, st->cut);
+	rmb_acc_free(sv, &st->cut);
 	rad_mem_free(&sv->mem, RAD_MEM_STUDY, st->deleted.keys);
 	rad_mem_free(&sv->mem, RAD_MEM_SCRATCH, st);
 	sv->impl = NULL;

@@ -21,6 +21,33 @@ typedef struct rmb_set {
 	size_t n, cap;
 } rmb_set;
 
+/*
+ * Receiver accuracy by element id (rmb_refine.c, rcv_too_coarse): nv
+ * values an id, zero until written.  Few elements have any, so they are
+ * an open-addressing map of slots (the id, RAD_NONE when empty, then
+ * the values), at most three quarters full, until the map would take
+ * as much as an array by id: then they are that array, to the elements
+ * there are and a block of the pool more.  The walk's error sums (err,
+ * emax) concern only the elements that can be split or were (an
+ * element that cannot has no children to pass its sum on to, and no
+ * cut of its own): 5,000-17,000 of the 1M field's 750,000 elements in
+ * each step, where arrays by id held 8 bytes for every element (6 MB)
+ * and the cuts 4 more.  The Graz office's 77,000 cuts of 375,000
+ * elements stay a map, the Blender box's 17,000 of 73,000 an array.
+ */
+typedef union rmb_acc_word {
+	uint32_t id;
+	float v;
+} rmb_acc_word;
+typedef struct rmb_acc {
+	rmb_acc_word *slot; /* the map's cap slots of 1 + nv words */
+	float *dense;       /* or the array's cap x nv values */
+	size_t n, cap;      /* map: ids held, slots (a power of 2, or 0);
+	                       array: ids covered */
+	uint32_t nv;        /* values an id: 1 or 2 */
+	rad_mem_kind kind;
+} rmb_acc;
+
 typedef struct rmb_state {
 	rad_wave wave; /* items: rmb_item; its todo is the work list */
 	uint32_t *roots;
@@ -46,12 +73,13 @@ typedef struct rmb_state {
 	uint64_t *fresh, *dead;
 	size_t cap_bits; /* words of each */
 	/* Receiver accuracy (rcv_too_coarse, rmb_refine.c), by element id:
-	 * cut   links at least this error (a fraction of the limit) go to
-	 *       the receiver's children; 0 = none.  Sticky, ELEM_SURFACE.
-	 * err   sum of the errors of the links gathered this iteration,
-	 * emax  the largest of them; SCRATCH, for one step. */
-	float *cut, *err, *emax;
-	size_t cap_cut, cap_err, cap_emax;
+	 * cut   v[0]: links at least this error (a fraction of the limit)
+	 *       go to the receiver's children; none held: no cut.  Sticky,
+	 *       ELEM_SURFACE.
+	 * err   v[0]: the sum of the errors of the links gathered this
+	 *       iteration, v[1]: the largest of them; SCRATCH, for one
+	 *       step. */
+	rmb_acc cut, err;
 	/* Delayed emission (rad_options.delay): what the leaves held back,
 	 * sum A S_B / rho per channel, put back into their I at the step's
 	 * start (rmb.c, hold_leaf). */
@@ -101,6 +129,14 @@ void rmb_count_deleted(rad_solver *sv, uint32_t id, rad_status *rs);
 /* Fill black[], arefl[] and rhomax[] for cluster id and below; returns
  * its reflecting area. */
 double rmb_mark_black(rad_solver *sv, uint32_t id);
+/* Receiver accuracy (rmb_acc): element id's values, or NULL when none
+ * are held (or zeros); the values of id, added as zeros if new (NULL:
+ * out of memory, or the budget refused the growth); bytes of the next
+ * growth; free. */
+const float *rmb_acc_get(const rmb_acc *m, uint32_t id);
+float *rmb_acc_put(rad_solver *sv, rmb_acc *m, uint32_t id);
+size_t rmb_acc_growth(const rad_solver *sv, const rmb_acc *m);
+void rmb_acc_free(rad_solver *sv, rmb_acc *m);
 /* The study set: a pair's key, and whether the set holds it. */
 uint64_t rmb_pair_key(uint32_t r, uint32_t s);
 int rmb_set_has(const rmb_set *s, uint64_t k);

@@ -10,6 +10,7 @@
 
 #include "rad.h"
 #include "rmb.h"
+#include "rng.h"
 
 /* ------------------------------------------------------ reflectance */
 
@@ -139,6 +140,137 @@ static rad_status set_add(rad_solver *sv, rmb_set *s, uint64_t k)
 		s->n++;
 	}
 	return RAD_OK;
+}
+
+/* ------------------------------------------ receiver accuracy: the map */
+
+static size_t acc_slot(const rmb_acc_word *slot, size_t cap, uint32_t nv,
+                       uint32_t id)
+{
+	uint64_t x = ((uint64_t)id + 1) * RAD_GOLDEN;
+	size_t i = (size_t)(x >> 32) & (cap - 1);
+	while (slot[i * (1 + nv)].id != RAD_NONE && slot[i * (1 + nv)].id != id)
+		i = (i + 1) & (cap - 1);
+	return i * (1 + nv);
+}
+
+const float *rmb_acc_get(const rmb_acc *m, uint32_t id)
+{
+	if (m->dense)
+		return id < m->cap ? &m->dense[(size_t)id * m->nv] : NULL;
+	if (!m->cap)
+		return NULL;
+	const rmb_acc_word *s = &m->slot[acc_slot(m->slot, m->cap, m->nv, id)];
+	return s->id == id ? &s[1].v : NULL;
+}
+
+#define ACC_FIRST 1024
+
+/* Ids an array would cover: the elements and a block of the pool more
+ * (not twice as many: the doubling held 8.4 MB where 6.0 would do on
+ * the 1M field). */
+static size_t acc_dense_ids(const rad_solver *sv, uint32_t id)
+{
+	const rad_pool *e = &sv->h.elems;
+	size_t n = (size_t)id + 1 > e->count ? (size_t)id + 1 : e->count;
+	return n + ((size_t)1 << e->shift);
+}
+
+static size_t acc_bytes(const rmb_acc *m, size_t cap)
+{
+	return cap * (m->dense ? m->nv : 1 + m->nv) * sizeof(float);
+}
+
+size_t rmb_acc_growth(const rad_solver *sv, const rmb_acc *m)
+{
+	if (!m->dense)
+		return acc_bytes(m, m->cap ? 2 * m->cap : ACC_FIRST) + 4096;
+	size_t n = acc_dense_ids(sv, 0);
+	return n > m->cap ? acc_bytes(m, n - m->cap) + 4096 : 0;
+}
+
+/* Make m an array covering id and every element, its ids copied. */
+static int acc_to_dense(rad_solver *sv, rmb_acc *m, uint32_t id)
+{
+	size_t n = acc_dense_ids(sv, id);
+	float *d = rad_mem_calloc(&sv->mem, m->kind, n, m->nv * sizeof(float));
+	if (!d)
+		return -1;
+	for (size_t i = 0; i < m->cap; i++) {
+		const rmb_acc_word *s = &m->slot[i * (1 + m->nv)];
+		if (s->id != RAD_NONE)
+			for (uint32_t k = 0; k < m->nv; k++)
+				d[(size_t)s->id * m->nv + k] = s[1 + k].v;
+	}
+	rad_mem_free(&sv->mem, m->kind, m->slot);
+	m->slot = NULL;
+	m->dense = d;
+	m->cap = n;
+	return 0;
+}
+
+static float *acc_dense_put(rad_solver *sv, rmb_acc *m, uint32_t id)
+{
+	if (id >= m->cap) {
+		size_t n = acc_dense_ids(sv, id), old = m->cap;
+		float *d = rad_mem_realloc(&sv->mem, m->kind, m->dense,
+		                           n * m->nv * sizeof(float));
+		if (!d)
+			return NULL;
+		memset(d + old * m->nv, 0, (n - old) * m->nv * sizeof(float));
+		m->dense = d;
+		m->cap = n;
+	}
+	return &m->dense[(size_t)id * m->nv];
+}
+
+float *rmb_acc_put(rad_solver *sv, rmb_acc *m, uint32_t id)
+{
+	if (m->dense)
+		return acc_dense_put(sv, m, id);
+	size_t w = 1 + m->nv;
+	if (m->cap) {
+		rmb_acc_word *s =
+		        &m->slot[acc_slot(m->slot, m->cap, m->nv, id)];
+		if (s->id == id)
+			return &s[1].v;
+	}
+	if (4 * (m->n + 1) > 3 * m->cap) {
+		size_t cap = m->cap ? 2 * m->cap : ACC_FIRST;
+		if (cap * w >= acc_dense_ids(sv, id) * m->nv)
+			return acc_to_dense(sv, m, id)
+			               ? NULL
+			               : acc_dense_put(sv, m, id);
+		rmb_acc_word *g =
+		        rad_mem_alloc(&sv->mem, m->kind, cap * w * sizeof(*g));
+		if (!g)
+			return NULL;
+		for (size_t i = 0; i < cap * w; i++)
+			g[i] = (rmb_acc_word){.v = 0};
+		for (size_t i = 0; i < cap; i++)
+			g[i * w].id = RAD_NONE;
+		for (size_t i = 0; i < m->cap; i++)
+			if (m->slot[i * w].id != RAD_NONE)
+				memcpy(&g[acc_slot(g, cap, m->nv,
+				                   m->slot[i * w].id)],
+				       &m->slot[i * w], w * sizeof(*g));
+		rad_mem_free(&sv->mem, m->kind, m->slot);
+		m->slot = g;
+		m->cap = cap;
+	}
+	rmb_acc_word *s = &m->slot[acc_slot(m->slot, m->cap, m->nv, id)];
+	s->id = id;
+	m->n++;
+	return &s[1].v;
+}
+
+void rmb_acc_free(rad_solver *sv, rmb_acc *m)
+{
+	rad_mem_free(&sv->mem, m->kind, m->slot);
+	rad_mem_free(&sv->mem, m->kind, m->dense);
+	m->slot = NULL;
+	m->dense = NULL;
+	m->n = m->cap = 0;
 }
 
 rad_status rmb_cover_links(rad_solver *sv, rmb_state *st)

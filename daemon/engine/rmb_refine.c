@@ -155,9 +155,10 @@ static int rcv_too_coarse(const rad_solver *sv, uint32_t r, double e)
 	const rmb_state *st = sv->impl;
 	if (e > 1)
 		return 1;
-	if (node_is_cluster(r) || node_is_light(r) || r >= st->cap_cut)
+	if (node_is_cluster(r) || node_is_light(r))
 		return 0;
-	return st->cut[r] > 0 && e >= st->cut[r];
+	const float *cut = rmb_acc_get(&st->cut, r);
+	return cut && cut[0] > 0 && e >= cut[0];
 }
 
 /* ------------------------------------------------------------- judging */
@@ -254,37 +255,23 @@ static uint8_t judge(rad_solver *sv, const void *item, int may_split,
 
 /* ------------------------------------------------------------ applying */
 
-/* Grow a per-element float array to cover id (new entries zero): to
- * every element there is and a block of the pool's more, not to twice
- * its size (the doubling held 8.4 MB where 6.0 would do on the 1M
- * field). */
-static rad_status cover(rad_solver *sv, rad_mem_kind kind, float **a,
-                        size_t *cap, uint32_t id)
-{
-	if (id < *cap)
-		return RAD_OK;
-	const rad_pool *e = &sv->h.elems;
-	size_t old = *cap, n = (size_t)id + 1;
-	if (n < e->count)
-		n = e->count;
-	n += (size_t)1 << e->shift;
-	float *p = rad_mem_realloc(&sv->mem, kind, *a, n * sizeof(float));
-	if (!p)
-		return RAD_ERR_NOMEM;
-	memset(p + old, 0, (n - old) * sizeof(float));
-	*a = p;
-	*cap = n;
-	return RAD_OK;
-}
-
+/* Add a link's error e to receiver r's sums (mark_cuts reads them),
+ * unless r is a leaf that cannot be split: its sum would have no
+ * children to go down to and no cut to make (rmb.h, rmb_acc).  Under a
+ * memory budget that refuses the map's growth, r's error goes
+ * untracked this step (the receiver is not cut for it): the walk goes
+ * on. */
 static rad_status track_err(rad_solver *sv, rmb_state *st, uint32_t r, double e)
 {
-	if (cover(sv, RAD_MEM_SCRATCH, &st->err, &st->cap_err, r) ||
-	    cover(sv, RAD_MEM_SCRATCH, &st->emax, &st->cap_emax, r))
-		return RAD_ERR_NOMEM;
-	st->err[r] += (float)e;
-	if (e > st->emax[r])
-		st->emax[r] = (float)e;
+	const rad_hier *h = &sv->h;
+	if (rad_elem_is_leaf(rad_elem_at(h, r)) && !rad_elem_can_split(h, r))
+		return RAD_OK;
+	float *v = rmb_acc_put(sv, &st->err, r);
+	if (!v)
+		return sv->mem.budget ? RAD_OK : RAD_ERR_NOMEM;
+	v[0] += (float)e;
+	if (e > v[1])
+		v[1] = (float)e;
 	return RAD_OK;
 }
 
@@ -716,17 +703,19 @@ static rad_status next_walk(rad_solver *sv, rmb_state *st)
 static rad_status mark_cuts(rad_solver *sv, rmb_state *st, uint32_t id,
                             double above)
 {
-	double mine = id < st->cap_err ? st->err[id] : 0;
+	const float *err = rmb_acc_get(&st->err, id);
+	double mine = err ? err[0] : 0;
 	double tot = above + mine;
 	if (tot > 1 && mine > 0 && rad_elem_can_split(&sv->h, id)) {
-		if (cover(sv, RAD_MEM_ELEM_SURFACE, &st->cut, &st->cap_cut, id))
-			return RAD_ERR_NOMEM;
 		/* The links of half the largest error or more (a quarter of
 		 * the sum pushes more of them: measured, leaves even out but
 		 * the closed box at rho 0.99 loses 9 % instead of 4 %). */
-		float c = 0.5f * st->emax[id];
-		if (st->cut[id] == 0 || c < st->cut[id])
-			st->cut[id] = c;
+		float c = 0.5f * err[1];
+		float *cut = rmb_acc_put(sv, &st->cut, id);
+		if (!cut && !sv->mem.budget)
+			return RAD_ERR_NOMEM;
+		if (cut && (cut[0] == 0 || c < cut[0]))
+			cut[0] = c; /* a budget that refuses it: no cut */
 	}
 	const rad_elem *e = rad_elem_at(&sv->h, id);
 	if (rad_elem_is_leaf(e))

@@ -18,6 +18,7 @@
 
 #include "mem.h"
 #include "rad.h"
+#include "rmb.h"
 #include "rng.h"
 #include "shared3.h"
 #include "solver.h"
@@ -1810,6 +1811,76 @@ static void test_limit_shared_between_processes(void **state)
 	munmap(pg, sizeof(*pg));
 }
 
+/* rmb's receiver accuracy (rmb.h, rmb_acc): ids map to their values
+ * while few, then become an array by id, with the same values; every
+ * byte counted, and given back. */
+static void test_rmb_acc_map_then_array(void **state)
+{
+	(void)state;
+	rad_scene *s = grid_room(64); /* 24,576 quads */
+	rad_options o;
+	rad_options_default(&o);
+	o.solver = RAD_SOLVER_RMB;
+	rad_solver *sv = NULL;
+	rad_error err;
+	assert_int_equal(rad_solver_new(s, &o, &sv, &err), RAD_OK);
+	uint32_t n = sv->h.elems.count, few = n / 5;
+	assert_true(n >= 24576 && few % 7919 != 0);
+	int64_t before = atomic_load(&sv->mem.bytes[RAD_MEM_SCRATCH]);
+	rmb_acc m = {.nv = 2, .kind = RAD_MEM_SCRATCH};
+	assert_null(rmb_acc_get(&m, 0));
+	/* Every fifth id, out of order. */
+	for (uint32_t k = 0; k < few; k++) {
+		uint32_t id = 5 * (uint32_t)((uint64_t)k * 7919 % few);
+		float *v = rmb_acc_put(sv, &m, id);
+		assert_non_null(v);
+		assert_true(v[0] == 0 && v[1] == 0);
+		v[0] = (float)id;
+		v[1] = -(float)id;
+	}
+	assert_null(m.dense);
+	assert_int_equal(m.n, few);
+	assert_true(4 * m.n <= 3 * m.cap);
+	for (uint32_t id = 0; id < 5 * few; id++) {
+		const float *v = rmb_acc_get(&m, id);
+		if (id % 5) {
+			assert_null(v);
+			continue;
+		}
+		assert_non_null(v);
+		assert_true(v[0] == (float)id && v[1] == -(float)id);
+	}
+	/* The map holds its slots, less than an array over the elements. */
+	int64_t held = atomic_load(&sv->mem.bytes[RAD_MEM_SCRATCH]) - before;
+	assert_true(held >= (int64_t)(m.cap * 3 * sizeof(float)));
+	assert_true(held < (int64_t)n * 2 * (int64_t)sizeof(float));
+	/* Every id: the map would outgrow an array by id. */
+	for (uint32_t id = 0; id < n; id++) {
+		float *v = rmb_acc_put(sv, &m, id);
+		assert_non_null(v);
+		if (id % 5 || id >= 5 * few) {
+			assert_true(v[0] == 0 && v[1] == 0);
+			v[0] = (float)id;
+			v[1] = -(float)id;
+		}
+	}
+	assert_non_null(m.dense);
+	assert_null(m.slot);
+	assert_true(m.cap >= n);
+	for (uint32_t id = 0; id < n; id++) {
+		const float *v = rmb_acc_get(&m, id);
+		assert_non_null(v);
+		assert_true(v[0] == (float)id && v[1] == -(float)id);
+	}
+	held = atomic_load(&sv->mem.bytes[RAD_MEM_SCRATCH]) - before;
+	assert_true(held >= (int64_t)(m.cap * 2 * sizeof(float)));
+	rmb_acc_free(sv, &m);
+	assert_null(m.dense);
+	assert_int_equal(atomic_load(&sv->mem.bytes[RAD_MEM_SCRATCH]), before);
+	rad_solver_free(sv);
+	rad_scene_free(s);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -1827,6 +1898,7 @@ int main(void)
 	        cmocka_unit_test(test_solver_alloc_failure_is_clean),
 	        cmocka_unit_test(test_hier_invariants),
 	        cmocka_unit_test(test_hlist_pack_keeps_lists),
+	        cmocka_unit_test(test_rmb_acc_map_then_array),
 	        cmocka_unit_test(test_elem_regions_derived),
 	        cmocka_unit_test(test_link_records),
 	        cmocka_unit_test(test_limit_refuses_cleanly),
