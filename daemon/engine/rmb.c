@@ -295,12 +295,9 @@ static rad_status rmb_init(rad_solver *sv, rad_error *err)
 	st->cut.nv = 1;
 	st->cut.kind = RAD_MEM_ELEM_SURFACE;
 	st->ncl = sv->h.clusters.count;
-	st->black = rad_mem_calloc(&sv->mem, RAD_MEM_ELEM_CLUSTER, st->ncl, 1);
 	st->arefl = rad_mem_calloc(&sv->mem, RAD_MEM_ELEM_CLUSTER, st->ncl,
 	                           sizeof(float));
-	st->rhomax = rad_mem_calloc(&sv->mem, RAD_MEM_ELEM_CLUSTER, st->ncl,
-	                            sizeof(float));
-	if (rs || !st->black || !st->arefl || !st->rhomax)
+	if (rs || !st->arefl || rmb_rho_init(sv, st))
 		return rad_fail(err, RAD_ERR_NOMEM, "rmb: out of memory");
 	if ((rs = rad_hier_keep_flux(&sv->h, err)) ||
 	    (rs = rad_hier_keep_deltas(&sv->h, err)))
@@ -393,7 +390,7 @@ static void rmb_destroy(rad_solver *sv)
 	rad_mem_free(&sv->mem, RAD_MEM_LINKS, st->roots);
 	rad_mem_free(&sv->mem, RAD_MEM_LINKS, st->fresh);
 	rad_mem_free(&sv->mem, RAD_MEM_LINKS, st->dead);
-	rad_mem_free(&sv->mem, RAD_MEM_ELEM_CLUSTER, st->black);
+	rad_mem_free(&sv->mem, RAD_MEM_ELEM_CLUSTER, st->rho_at);
 	rad_mem_free(&sv->mem, RAD_MEM_ELEM_CLUSTER, st->arefl);
 	rad_mem_free(&sv->mem, RAD_MEM_ELEM_CLUSTER, st->rhomax);
 	rmb_acc_free(sv, &st->cut);

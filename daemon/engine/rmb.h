@@ -52,9 +52,16 @@ typedef struct rmb_state {
 	rad_wave wave; /* items: rmb_item; its todo is the work list */
 	uint32_t *roots;
 	size_t nroots, cap_roots; /* stored root links, LINKS */
-	uint8_t *black;           /* per cluster id: contents all rho = 0 */
-	float *arefl;             /* per cluster id: area that reflects */
-	float *rhomax;            /* per cluster id: largest reflectance */
+	float *arefl; /* per cluster id: area that reflects (0: none, the
+	                 contents all rho = 0) */
+	/* Per cluster id, the largest reflectance inside: one of the
+	 * materials' largest (or 0), so rho_levels[rho_at[id]], 1 byte a
+	 * cluster, where it was a float; where the materials have more than
+	 * 256 of them (with 0), rhomax[id] (rmb_node_rho_max). */
+	uint8_t *rho_at;
+	float *rhomax;
+	float rho_levels[256];
+	uint32_t nlevels;
 	uint32_t ncl;
 	uint32_t iter;     /* iterations done */
 	uint32_t init_row; /* without clustering: rows of polygon pairs the
@@ -126,8 +133,11 @@ double rmb_spread_limit(const rad_solver *sv);
  * iteration, and its pair kept for the study statistics (*rs: out of
  * memory). */
 void rmb_count_deleted(rad_solver *sv, uint32_t id, rad_status *rs);
-/* Fill black[], arefl[] and rhomax[] for cluster id and below; returns
- * its reflecting area. */
+/* The largest reflectances there are (rho_levels), and where to keep
+ * them by cluster; RAD_ERR_NOMEM. */
+rad_status rmb_rho_init(rad_solver *sv, rmb_state *st);
+/* Fill arefl[] and the largest reflectances for cluster id and below;
+ * returns its reflecting area. */
 double rmb_mark_black(rad_solver *sv, uint32_t id);
 /* Receiver accuracy (rmb_acc): element id's values, or NULL when none
  * are held (or zeros); the values of id, added as zeros if new (NULL:

@@ -6,6 +6,7 @@
  * Below both files, so that neither calls up into the other's.
  */
 #include <math.h>
+#include <stdlib.h>
 #include <string.h>
 
 #include "rad.h"
@@ -20,7 +21,7 @@ int rmb_node_black(const rad_solver *sv, uint32_t t)
 	if (node_is_light(t))
 		return 1;
 	if (node_is_cluster(t))
-		return st->black[node_index(t)];
+		return st->arefl[node_index(t)] == 0;
 	const float *rho = rad_elem_mat(&sv->h, t)->rho;
 	return rho[0] == 0 && rho[1] == 0 && rho[2] == 0;
 }
@@ -39,7 +40,61 @@ static double elem_rho_max(const rad_solver *sv, uint32_t id)
 	return fmax(rho[0], fmax(rho[1], rho[2]));
 }
 
-/* Fill black[], arefl[] and rhomax[] for cluster id and below. */
+static int cmp_float(const void *a, const void *b)
+{
+	float x = *(const float *)a, y = *(const float *)b;
+	return (x > y) - (x < y);
+}
+
+rad_status rmb_rho_init(rad_solver *sv, rmb_state *st)
+{
+	const rad_scene *s = sv->scene;
+	uint32_t n = 0;
+	st->rho_levels[n++] = 0;
+	for (uint32_t m = 0; m < s->nmats && n <= 256; m++) {
+		const float *rho = s->mats[m].rho;
+		float r = (float)fmax(rho[0], fmax(rho[1], rho[2]));
+		uint32_t k = 0;
+		while (k < n && st->rho_levels[k] != r)
+			k++;
+		if (k == n && n < 256)
+			st->rho_levels[n] = r;
+		n += k == n;
+	}
+	if (n > 256) {
+		st->rhomax = rad_mem_calloc(&sv->mem, RAD_MEM_ELEM_CLUSTER,
+		                            st->ncl, sizeof(float));
+		return st->rhomax ? RAD_OK : RAD_ERR_NOMEM;
+	}
+	qsort(st->rho_levels, n, sizeof(float), cmp_float);
+	st->nlevels = n;
+	st->rho_at = rad_mem_calloc(&sv->mem, RAD_MEM_ELEM_CLUSTER, st->ncl, 1);
+	return st->rho_at ? RAD_OK : RAD_ERR_NOMEM;
+}
+
+static float cluster_rho_max(const rmb_state *st, uint32_t id)
+{
+	return st->rho_at ? st->rho_levels[st->rho_at[id]] : st->rhomax[id];
+}
+
+static void set_cluster_rho_max(rmb_state *st, uint32_t id, float r)
+{
+	if (!st->rho_at) {
+		st->rhomax[id] = r;
+		return;
+	}
+	uint32_t lo = 0, hi = st->nlevels - 1; /* r is one of them */
+	while (lo < hi) {
+		uint32_t mid = (lo + hi) / 2;
+		if (st->rho_levels[mid] < r)
+			lo = mid + 1;
+		else
+			hi = mid;
+	}
+	st->rho_at[id] = (uint8_t)lo;
+}
+
+/* Fill arefl[] and the largest reflectances for cluster id and below. */
 double rmb_mark_black(rad_solver *sv, uint32_t id)
 {
 	rmb_state *st = sv->impl;
@@ -48,16 +103,16 @@ double rmb_mark_black(rad_solver *sv, uint32_t id)
 	if (!rad_cluster_is_leaf(c)) {
 		a += rmb_mark_black(sv, c->child);
 		a += rmb_mark_black(sv, c->child + 1);
-		rm = fmax(st->rhomax[c->child], st->rhomax[c->child + 1]);
+		rm = fmax(cluster_rho_max(st, c->child),
+		          cluster_rho_max(st, c->child + 1));
 	} else {
 		for (uint32_t j = c->first; j < c->first + c->count; j++) {
 			a += rmb_node_arefl(sv, sv->h.order[j]);
 			rm = fmax(rm, elem_rho_max(sv, sv->h.order[j]));
 		}
 	}
-	st->rhomax[id] = (float)rm;
+	set_cluster_rho_max(st, id, (float)rm);
 	st->arefl[id] = (float)a;
-	st->black[id] = a == 0;
 	return a;
 }
 
@@ -67,7 +122,7 @@ double rmb_node_rho_max(const rad_solver *sv, uint32_t t)
 	if (node_is_light(t))
 		return 0;
 	if (node_is_cluster(t))
-		return st->rhomax[node_index(t)];
+		return cluster_rho_max(st, node_index(t));
 	return elem_rho_max(sv, t);
 }
 
@@ -94,7 +149,7 @@ double rmb_spread_limit(const rad_solver *sv)
 	if (st->iter == 0)
 		return sv->opt.variation * sv->flux_scale /
 		       sv->scene->total_area;
-	double floor = (1 - st->rhomax[0]) * st->mean_B;
+	double floor = (1 - cluster_rho_max(st, 0)) * st->mean_B;
 	return sv->opt.variation * fmax(st->mean_dB, floor);
 }
 

@@ -801,16 +801,21 @@ static void test_solver_alloc_failure_is_clean(void **state)
 }
 
 /* A unit room whose six faces are cut into n x n quads; the ceiling
- * emits.  On failure the scene is freed and the status returned. */
-static rad_status build_grid_room(int n, rad_scene **out, rad_error *err)
+ * emits.  The walls' quads take nwalls materials in turn, of
+ * reflectance 0.5, 0.501, ... (at most 1,000).  On failure the scene
+ * is freed and the status returned. */
+static rad_status build_room_of(int n, int nwalls, rad_scene **out,
+                                rad_error *err)
 {
 	rad_scene *s = NULL;
-	double rho[3] = {0.5, 0.5, 0.5}, zero[3] = {0, 0, 0};
+	double zero[3] = {0, 0, 0};
 	double lum[3] = {100, 100, 100};
-	uint32_t wall, lamp, node;
+	uint32_t wall[1000], lamp, node;
 	rad_status st = rad_scene_new(&s, err);
-	if (!st)
-		st = rad_scene_add_material(s, rho, zero, &wall, err);
+	for (int m = 0; m < nwalls && !st; m++) {
+		double r = 0.5 + 0.001 * m, rho[3] = {r, r, r};
+		st = rad_scene_add_material(s, rho, zero, &wall[m], err);
+	}
 	if (!st)
 		st = rad_scene_add_material(s, zero, lum, &lamp, err);
 	if (!st)
@@ -836,9 +841,10 @@ static rad_status build_grid_room(int n, rad_scene **out, rad_error *err)
 				for (int k = 0; k < 6; k++)
 					memcpy(&t[3 * k], c[idx[side][k]],
 					       sizeof(double[3]));
+				uint32_t w =
+				        wall[((f * n + i) * n + j) % nwalls];
 				st = rad_scene_add_triangles(
-				        s, f == 3 ? lamp : wall, node, t, 2,
-				        err);
+				        s, f == 3 ? lamp : w, node, t, 2, err);
 			}
 		}
 	}
@@ -850,6 +856,11 @@ static rad_status build_grid_room(int n, rad_scene **out, rad_error *err)
 	}
 	*out = s;
 	return st;
+}
+
+static rad_status build_grid_room(int n, rad_scene **out, rad_error *err)
+{
+	return build_room_of(n, 1, out, err);
 }
 
 /* The grid room of side n, failing the test without it. */
@@ -1881,6 +1892,51 @@ static void test_rmb_acc_map_then_array(void **state)
 	rad_scene_free(s);
 }
 
+/* rmb keeps a cluster's largest reflectance as an index into the ones
+ * the materials have, or as a float where they have more than 256: the
+ * same value either way, and the same solution. */
+static void test_rmb_rho_levels(void **state)
+{
+	(void)state;
+	for (int k = 0; k < 2; k++) {
+		int nwalls = k ? 300 : 200; /* 201 and 301 with 0 */
+		rad_scene *s = NULL;
+		rad_error err;
+		assert_int_equal(build_room_of(18, nwalls, &s, &err), RAD_OK);
+		rad_options o;
+		rad_options_default(&o);
+		o.solver = RAD_SOLVER_RMB;
+		rad_solver *sv = NULL;
+		assert_int_equal(rad_solver_new(s, &o, &sv, &err), RAD_OK);
+		const rmb_state *st = sv->impl;
+		assert_true(k ? st->rhomax && !st->rho_at
+		              : st->rho_at && !st->rhomax);
+		/* The root holds them all; a leaf of four wall quads, the
+		 * largest of its own. */
+		float top = (float)(0.5 + 0.001 * (nwalls - 1));
+		assert_true(rmb_node_rho_max(sv, RAD_TAG_CLUSTER) == top);
+		const rad_hier *h = &sv->h;
+		for (uint32_t c = 0; c < h->clusters.count; c++) {
+			const rad_cluster *cl = rad_cluster_at(h, c);
+			if (!rad_cluster_is_leaf(cl))
+				continue;
+			float want = 0;
+			for (uint32_t j = cl->first; j < cl->first + cl->count;
+			     j++) {
+				const float *rho =
+				        s->mats[s->polys[h->order[j]].mat].rho;
+				want = rho[0] > want ? rho[0] : want;
+			}
+			assert_true(rmb_node_rho_max(sv, c | RAD_TAG_CLUSTER) ==
+			            want);
+		}
+		assert_int_equal(rad_solver_step(sv, &err), RAD_OK);
+		assert_int_equal(rad_solver_step(sv, &err), RAD_OK);
+		rad_solver_free(sv);
+		rad_scene_free(s);
+	}
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -1899,6 +1955,7 @@ int main(void)
 	        cmocka_unit_test(test_hier_invariants),
 	        cmocka_unit_test(test_hlist_pack_keeps_lists),
 	        cmocka_unit_test(test_rmb_acc_map_then_array),
+	        cmocka_unit_test(test_rmb_rho_levels),
 	        cmocka_unit_test(test_elem_regions_derived),
 	        cmocka_unit_test(test_link_records),
 	        cmocka_unit_test(test_limit_refuses_cleanly),
