@@ -34,10 +34,15 @@ double rmb_node_arefl(const rad_solver *sv, uint32_t t)
 	return rmb_node_black(sv, t) ? 0 : node_area(&sv->h, t);
 }
 
+/* A material's largest reflectance over the channels. */
+static double mat_rho_max(const rad_material *m)
+{
+	return fmax(m->rho[0], fmax(m->rho[1], m->rho[2]));
+}
+
 static double elem_rho_max(const rad_solver *sv, uint32_t id)
 {
-	const float *rho = rad_elem_mat(&sv->h, id)->rho;
-	return fmax(rho[0], fmax(rho[1], rho[2]));
+	return mat_rho_max(rad_elem_mat(&sv->h, id));
 }
 
 static int cmp_float(const void *a, const void *b)
@@ -49,22 +54,22 @@ static int cmp_float(const void *a, const void *b)
 rad_status rmb_rho_init(rad_solver *sv, rmb_state *st)
 {
 	const rad_scene *s = sv->scene;
-	uint32_t n = 0;
-	st->rho_levels[n++] = 0;
-	for (uint32_t m = 0; m < s->nmats && n <= 256; m++) {
-		const float *rho = s->mats[m].rho;
-		float r = (float)fmax(rho[0], fmax(rho[1], rho[2]));
+	uint32_t n = 1;
+	st->rho_levels[0] = 0;
+	for (uint32_t m = 0; m < s->nmats; m++) {
+		float r = (float)mat_rho_max(&s->mats[m]);
 		uint32_t k = 0;
 		while (k < n && st->rho_levels[k] != r)
 			k++;
-		if (k == n && n < 256)
-			st->rho_levels[n] = r;
-		n += k == n;
-	}
-	if (n > 256) {
-		st->rhomax = rad_mem_calloc(&sv->mem, RAD_MEM_ELEM_CLUSTER,
-		                            st->ncl, sizeof(float));
-		return st->rhomax ? RAD_OK : RAD_ERR_NOMEM;
+		if (k < n)
+			continue;
+		if (n == 256) { /* more than a byte can index: floats */
+			st->rhomax =
+			        rad_mem_calloc(&sv->mem, RAD_MEM_ELEM_CLUSTER,
+			                       st->ncl, sizeof(float));
+			return st->rhomax ? RAD_OK : RAD_ERR_NOMEM;
+		}
+		st->rho_levels[n++] = r;
 	}
 	qsort(st->rho_levels, n, sizeof(float), cmp_float);
 	st->nlevels = n;
